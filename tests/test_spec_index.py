@@ -1,0 +1,67 @@
+"""spec/index.toml is complete: every ID has an importable reference, an importable fast
+twin, and tests that exist and carry its marker."""
+
+import importlib
+import json
+import pathlib
+import subprocess
+import sys
+import tomllib
+
+import pytest
+
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+INDEX = tomllib.loads((ROOT / "spec" / "index.toml").read_text())["equation"]
+
+REQUIRED = [
+    "VG-QUAT", "VG-COV", "VG-PROJ", "VG-SH", "VG-ALPHA", "VG-BLEND", "VG-BASIS", "VG-CODE",
+    "VG-COEF", "VG-VEL", "VG-INTEG", "VG-ROTSCALE", "VG-ADF", "VG-ACC", "VG-TRANSPORT",
+    "VG-DIV", "VG-LOSS", "VG-METRIC",
+]
+
+
+def _resolve(dotted):
+    module, _, name = dotted.rpartition(".")
+    return getattr(importlib.import_module(module), name)
+
+
+def test_required_ids_present():
+    ids = [e["id"] for e in INDEX]
+    assert len(ids) == len(set(ids)), "duplicate IDs in spec/index.toml"
+    missing = [i for i in REQUIRED if i not in ids]
+    assert not missing, f"required spec IDs missing from spec/index.toml: {missing}"
+
+
+@pytest.mark.parametrize("entry", INDEX, ids=[e["id"] for e in INDEX])
+def test_entry_imports_and_is_documented(entry):
+    assert callable(_resolve(entry["ref"])), entry["ref"]
+    assert entry["fast"], f"{entry['id']}: no fast twin"
+    assert callable(_resolve(entry["fast"])), entry["fast"]
+    # Same function name in both packages: the fast path mirrors the reference.
+    assert entry["ref"].split(".", 1)[1] == entry["fast"].split(".", 1)[1]
+    section = (ROOT / entry["section"]).read_text()
+    assert f"## {entry['id']} " in section, f"{entry['id']} has no section in {entry['section']}"
+
+
+def test_index_tests_match_markers():
+    # A separate collection of the whole tree, so the check holds however pytest was invoked.
+    out = subprocess.run(
+        [sys.executable, "-m", "tests.sync_spec_index", "--print"],
+        cwd=ROOT, capture_output=True, text=True, check=True,
+    ).stdout
+    marked = json.loads(out.strip().splitlines()[-1])
+    for entry in INDEX:
+        listed = sorted(entry["tests"])
+        assert listed, f"{entry['id']}: no test pins it"
+        assert listed == marked.get(entry["id"], []), (
+            f"{entry['id']}: index lists {listed} but markers say {marked.get(entry['id'], [])}; "
+            "run `python -m tests.sync_spec_index`"
+        )
+
+
+def test_readme_spec_table_is_current():
+    from tests.sync_spec_index import with_spec_table
+
+    readme = (ROOT / "README.md").read_text()
+    assert readme == with_spec_table(readme, INDEX), "README spec table is stale; run `python -m tests.sync_spec_index`"

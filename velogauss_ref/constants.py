@@ -1,0 +1,74 @@
+"""Every numerical threshold of velogauss, in one place (spec/conventions.md, "Constants").
+
+Both `velogauss_ref` and `velogauss_fast` import from here; changing a value is a reviewed
+event because the reference, the fast path and the spec all move together. Each value
+carries the reason it has that value.
+"""
+
+# --- Quaternions (VG-QUAT) -------------------------------------------------------------
+# A quaternion whose squared norm is below this is treated as "no rotation" (identity)
+# instead of being normalised: dividing by a norm this small amplifies rounding noise
+# into an arbitrary rotation, and denormal inputs would overflow. 1e-24 is the square of
+# 1e-12, far below any quaternion an optimiser produces, yet representable in float32.
+QUAT_ZERO_NORM_SQ = 1e-24
+
+# --- Projection (VG-PROJ) --------------------------------------------------------------
+# Gaussians whose camera-space depth is below this are culled. 3DGS and gsplat use 0.01:
+# the perspective Jacobian grows like 1/z^2, so closer Gaussians explode in screen size.
+NEAR_PLANE = 0.01
+# Gaussians beyond this depth are culled (gsplat's default far plane); it only guards
+# against inf/overflow for absurd depths.
+FAR_PLANE = 1e10
+# The perspective Jacobian is evaluated at x/z clamped to the image's half-extent plus
+# this fraction of tan(fov/2) (1 + 0.3 = 1.3 for a centred principal point, as in 3DGS).
+# Beyond the frustum the linearisation is meaningless and would stretch off-screen
+# Gaussians into huge on-screen smears.
+FRUSTUM_GUARD = 0.3
+# Added to both diagonal entries of every 2D covariance (pixels^2): a low-pass filter that
+# makes each splat at least about one pixel wide, so a Gaussian thinner than a pixel
+# neither aliases nor yields a singular conic. 3DGS and gsplat use 0.3.
+EPS2D = 0.3
+# Screen-space extent: the splat's support is cut at this many standard deviations along
+# its major axis (3 sigma holds 98.9% of a 2D Gaussian's mass). Same as 3DGS.
+GAUSSIAN_EXTENT_SIGMA = 3.0
+# Floor under the discriminant when computing the 2D covariance's largest eigenvalue:
+# keeps the square root away from 0 (and its infinite derivative) for isotropic splats.
+# Same value as 3DGS/gsplat.
+EIGEN_DISCRIMINANT_FLOOR = 0.01
+
+# --- Alpha and blending (VG-ALPHA, VG-BLEND) -------------------------------------------
+# Per-splat opacity is clamped to this so that (1 - alpha) never reaches 0: the backward
+# pass divides by (1 - alpha) and a single fully opaque splat would otherwise stop all
+# gradients behind it. 3DGS uses 0.99.
+ALPHA_MAX = 0.99
+# Splat contributions with alpha below this are skipped: below one 8-bit quantisation
+# step they cannot change a displayed pixel. 3DGS uses 1/255.
+ALPHA_MIN = 1.0 / 255.0
+# Front-to-back blending stops before the splat that would bring the transmittance below
+# this: anything behind contributes less than 1e-4 of the pixel. 3DGS uses 1e-4.
+TRANSMITTANCE_MIN = 1e-4
+
+# --- Photometric loss and metrics (VG-LOSS, VG-METRIC) ---------------------------------
+# D-SSIM weight in the photometric loss (1 - lambda) * L1 + lambda * (1 - SSIM); 3DGS's 0.2.
+LAMBDA_DSSIM = 0.2
+# SSIM: Gaussian window of 11 x 11 taps with sigma 1.5 and stabilisers K1, K2 for a data
+# range of 1.0 -- the values of Wang et al. (2004), used by every NeRF/3DGS evaluation.
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+SSIM_K1 = 0.01
+SSIM_K2 = 0.03
+# PSNR of identical images would be +inf; the MSE is floored here so that PSNR is capped
+# at 10 * log10(1 / 1e-10) = 100 dB and means over frames stay finite.
+PSNR_MSE_FLOOR = 1e-10
+# LPIPS normalises each feature channel vector by its norm plus this (lpips 0.1's value).
+LPIPS_NORM_EPS = 1e-10
+
+# --- Motion (VG-INTEG, VG-ROTSCALE, VG-ACC) --------------------------------------------
+# Degree of the per-pattern polynomial in time for the acceleration coefficients: degree 2
+# represents gravity (degree 0) and spin about a centre moving under gravity (degree 2)
+# exactly, while a bounded degree keeps the transport residual binding on v.
+ACC_POLY_DEGREE = 2
+# A particle whose base trajectory moves less than this (world units) over the observed
+# window is "static": it is frozen at its canonical state and not integrated. Two orders
+# below the typical Gaussian scale of the synthetic scenes (about 1e-2).
+STATIC_DISPLACEMENT_MAX = 1e-4
