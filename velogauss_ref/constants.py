@@ -72,3 +72,28 @@ ACC_POLY_DEGREE = 2
 # window is "static": it is frozen at its canonical state and not integrated. Two orders
 # below the typical Gaussian scale of the synthetic scenes (about 1e-2).
 STATIC_DISPLACEMENT_MAX = 1e-4
+
+# --- Data loading (velogauss.data) -----------------------------------------------------
+# A camera pose is accepted as rigid when its rotation block R satisfies
+# max |R^T R - I| <= this and its bottom row is (0, 0, 0, 1) to within it. Poses written by
+# Blender/NeRF tools carry float32 or 6-decimal rounding (errors ~1e-6), which must pass;
+# a scaled, sheared or degenerate matrix (errors ~1e-1 and up) must not, because the
+# renderer's camera centre -R^T t assumes a rigid world-to-camera map.
+POSE_ORTHONORMAL_TOL = 1e-3
+
+# --- Export (velogauss.export) ---------------------------------------------------------
+# 3DGS PLY files store opacity as a logit. Opacities are clamped to [this, 1 - this] before
+# the logit so that a fully transparent or opaque Gaussian (sigmoid saturated in float32)
+# is written as a finite value (|logit| <= 16.2) instead of -inf/+inf, which splat viewers
+# reject. Only opacities within 1e-7 of 0 or 1 change, by at most 1e-7: far below ALPHA_MIN
+# (1/255) and the ALPHA_MAX clamp (0.99), so no rendered pixel changes.
+EXPORT_OPACITY_CLAMP = 1e-7
+
+# --- Evaluation against synthetic ground truth (velogauss.evaluate) -------------------
+# A Gaussian counts as "on" a body for the trajectory error when its canonical mean lies
+# inside the body or within this distance (world units) of its surface. Trained Gaussians
+# sit on or just off the surface they model, typically within a few Gaussian scales
+# (about 1e-2 in the synthetic scenes); 0.05 keeps those and drops floaters. Where two
+# bodies are closer than this (multi's cube rests on the ground), a Gaussian goes to the
+# nearer one (AnalyticScene.body_index), so membership stays well defined.
+EVAL_SURFACE_MARGIN = 0.05

@@ -1,0 +1,126 @@
+"""Tests of velogauss/cli.py: every subcommand's help, the scene list, bad input (exit code 2
+and one line naming the thing), and one small end-to-end train → eval → render → export run."""
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from velogauss.cli import app, default_run_dir, parse_background, train_overrides
+from velogauss.scenes import SCENES
+
+runner = CliRunner()
+COMMANDS = ["make-scene", "train", "eval", "render", "export", "bench"]
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def assert_bad_input(result, *names):
+    """Exit code 2, one `error:` line naming every item of `names`, no traceback."""
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    for name in names:
+        assert str(name) in errors[0], (name, errors[0])
+    assert "Traceback" not in result.output
+
+
+def test_top_level_help_lists_every_command():
+    result = invoke("--help")
+    assert result.exit_code == 0
+    for command in COMMANDS:
+        assert command in result.output
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_subcommand_help(command):
+    result = invoke(command, "--help")
+    assert result.exit_code == 0, result.output
+    assert "Usage:" in result.output
+
+
+def test_make_scene_list_shows_every_scene_and_its_effects():
+    result = invoke("make-scene", "--list")
+    assert result.exit_code == 0
+    lines = result.output.strip().splitlines()
+    assert len(lines) == len(SCENES)
+    for line, (name, build) in zip(lines, SCENES.items()):
+        assert line.startswith(name)
+        assert ", ".join(build().effects) in line
+    assert "(default)" in result.output
+
+
+def test_make_scene_unknown_name(tmp_path):
+    assert_bad_input(invoke("make-scene", "volcano", "--out", tmp_path / "s"), "volcano")
+
+
+def test_make_scene_without_name():
+    assert_bad_input(invoke("make-scene"), "NAME")
+
+
+def test_eval_missing_run_dir(tmp_path):
+    missing = tmp_path / "no-such-run"
+    assert_bad_input(invoke("eval", missing), missing)
+
+
+def test_render_run_dir_without_checkpoint(tmp_path):
+    (tmp_path / "run").mkdir()
+    assert_bad_input(invoke("render", tmp_path / "run"), Path("checkpoints") / "latest.pt")
+
+
+@pytest.mark.parametrize("time", ["nan", "inf", "soon"])
+def test_export_bad_time(tmp_path, time):
+    assert_bad_input(invoke("export", tmp_path, "--time", time), "t:", time)
+
+
+def test_eval_bad_split(tmp_path):
+    assert_bad_input(invoke("eval", tmp_path, "--split", "future"), "--split", "future")
+
+
+def test_train_bad_background(tmp_path):
+    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--background", "1,0"), "--background", "1,0")
+
+
+def test_train_bad_effect(tmp_path):
+    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--effects", "rotation,magic"), "--effects", "magic")
+
+
+def test_train_missing_data_dir(tmp_path):
+    missing = tmp_path / "nowhere"
+    assert_bad_input(invoke("train", missing, "--out", tmp_path / "run"), missing)
+
+
+def test_train_missing_config_file(tmp_path):
+    missing = tmp_path / "cfg.toml"
+    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--config", missing), missing)
+
+
+def test_bench_unknown_benchmark():
+    assert_bad_input(invoke("bench", "disk"), "disk")
+
+
+def test_flags_become_config_overrides():
+    overrides = train_overrides(effects="translation, rotation", max_time=0.5, half_res=True, background="black")
+    assert "data.max_time=0.5" in overrides
+    assert "data.half_res=true" in overrides
+    assert "data.background=[0.0, 0.0, 0.0]" in overrides
+    assert 'model.effects=["translation", "rotation"]' in overrides
+
+
+def test_background_parsing():
+    assert parse_background("white") == (1.0, 1.0, 1.0)
+    assert parse_background("0.1,0.2,0.3") == (0.1, 0.2, 0.3)
+    with pytest.raises(ValueError, match="^--background: "):
+        parse_background("2,0,0")
+
+
+def test_default_run_dir_names_scene_and_time():
+    import datetime
+
+    path = default_run_dir("toss", now=datetime.datetime(2025, 3, 4, 5, 6, 7))
+    assert path == Path("runs") / "toss-20250304-050607"

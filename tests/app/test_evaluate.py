@@ -1,0 +1,201 @@
+"""Tests of velogauss/evaluate.py: metric bookkeeping on hand-made predictions and the motion
+errors against an analytic scene, with stand-in models whose answers are known exactly."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from velogauss import evaluate
+from velogauss.data import Camera, Frame
+from velogauss.data.cameras import intrinsics_from_fov, look_at
+from velogauss.scenes import SCENES
+from velogauss_ref.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN, SSIM_K1, SSIM_K2
+
+LPIPS_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "lpips"
+SIZE = 24  # >= the 11-tap SSIM window
+
+
+def _camera():
+    return Camera(look_at(np.array([0.0, -4.0, 1.0]), np.zeros(3)), intrinsics_from_fov(0.7, SIZE, SIZE), SIZE, SIZE)
+
+
+def _frame(time, value):
+    return Frame(np.full((SIZE, SIZE, 3), value, dtype=np.float32), time, _camera(), f"test/r_{time:.2f}.png")
+
+
+class ConstantImageModel:
+    """Renders a flat grey image whose value is `value_of(t)`."""
+
+    def __init__(self, value_of):
+        self.value_of = value_of
+        self.calls = []
+
+    def render(self, camera, t, background):
+        self.calls.append(t)
+        return torch.full((camera.height, camera.width, 3), float(self.value_of(t))), None, {}
+
+
+def test_identical_images_hit_the_psnr_cap_and_ssim_one(rng):
+    image = rng.uniform(size=(SIZE, SIZE, 3)).astype(np.float32)
+    row = evaluate.frame_metrics(image, image, with_lpips=False)
+    # PSNR_MSE_FLOOR = 1e-10 caps PSNR at exactly 100 dB; SSIM of x with itself is 1
+    # (float32 rounding of the local statistics: 1e-5).
+    assert row["psnr"] == pytest.approx(100.0, abs=1e-6)
+    assert row["ssim"] == pytest.approx(1.0, abs=1e-5)
+    assert set(row) == {"psnr", "ssim"}
+
+
+def test_known_offset_gives_known_psnr_and_ssim():
+    gt = np.full((SIZE, SIZE, 3), 0.5, dtype=np.float32)
+    row = evaluate.frame_metrics(gt + 0.1, gt, with_lpips=False)
+    # MSE = 0.01 -> PSNR = 10 log10(1 / 0.01) = 20 dB; float32 inputs: 1e-4 dB.
+    assert row["psnr"] == pytest.approx(20.0, abs=1e-4)
+    # Flat images: sigma terms vanish, SSIM = (2 mu_x mu_y + C1) / (mu_x^2 + mu_y^2 + C1).
+    c1 = SSIM_K1**2
+    assert row["ssim"] == pytest.approx((2 * 0.6 * 0.5 + c1) / (0.36 + 0.25 + c1), abs=1e-5)
+    assert SSIM_K2 > 0  # the C2 factor cancels only because it is non-zero
+
+
+def test_prediction_is_clipped_to_the_image_range():
+    gt = np.ones((SIZE, SIZE, 3), dtype=np.float32)
+    assert evaluate.frame_metrics(gt + 2.0, gt, with_lpips=False)["psnr"] == pytest.approx(100.0, abs=1e-6)
+
+
+def test_shape_mismatch_names_pred():
+    with pytest.raises(ValueError, match="^pred: "):
+        evaluate.frame_metrics(np.zeros((SIZE, SIZE, 3)), np.zeros((SIZE, SIZE + 1, 3)), with_lpips=False)
+
+
+@pytest.mark.skipif(not (LPIPS_DIR / "alex.npz").is_file(), reason="LPIPS weights not beside the checkout")
+def test_lpips_of_identical_images_is_zero(rng):
+    image = rng.uniform(size=(32, 32, 3)).astype(np.float32)
+    row = evaluate.frame_metrics(image, image, lpips_weights=LPIPS_DIR)
+    # Identical feature maps: every squared difference is exactly 0.
+    assert row["lpips_alex"] == pytest.approx(0.0, abs=1e-7)
+    assert row["lpips_vgg"] == pytest.approx(0.0, abs=1e-7)
+
+
+def test_mean_over_frames_and_missing_metrics():
+    means = evaluate.mean_metrics([{"psnr": 10.0, "ssim": 0.5}, {"psnr": 30.0, "ssim": 1.0}])
+    assert means == {"psnr": 20.0, "ssim": 0.75, "lpips_alex": None, "lpips_vgg": None}
+    assert evaluate.mean_metrics([]) == dict.fromkeys(evaluate.IMAGE_METRICS)
+
+
+def test_split_bookkeeping_per_frame_and_mean():
+    # Frame k has ground truth 0.5 and prediction 0.5 + d_k: PSNR_k = -20 log10(d_k).
+    offsets = {0.1: 0.1, 0.3: 0.01}
+    model = ConstantImageModel(lambda t: 0.5 + offsets[round(t, 6)])
+    frames = [_frame(t, 0.5) for t in offsets]
+    split = evaluate.evaluate_split(model, frames, np.ones(3), name="interpolation")
+    assert split["count"] == 2
+    assert [r["time"] for r in split["frames"]] == pytest.approx([0.1, 0.3])
+    assert [r["path"] for r in split["frames"]] == ["test/r_0.10.png", "test/r_0.30.png"]
+    # Float32 images: 1e-3 dB.
+    assert [r["psnr"] for r in split["frames"]] == pytest.approx([20.0, 40.0], abs=1e-3)
+    assert split["mean"]["psnr"] == pytest.approx(30.0, abs=1e-3)
+
+
+def test_freeze_baseline_renders_at_max_time():
+    model = ConstantImageModel(lambda t: t)  # brightness = time: a perfect "motion" model
+    frames = [_frame(0.8, 0.8), _frame(0.9, 0.9)]
+    base = evaluate.freeze_baseline(model, frames, np.ones(3), max_time=0.75)
+    assert model.calls == [0.75, 0.75]
+    # Frozen at 0.75: errors 0.05 and 0.15 -> PSNR 26.0206 and 16.4782 dB.
+    expected = [-20 * math.log10(0.05), -20 * math.log10(0.15)]
+    assert [r["psnr"] for r in base["frames"]] == pytest.approx(expected, abs=1e-3)
+    assert base["mean"]["psnr"] == pytest.approx(np.mean(expected), abs=1e-3)
+    own = evaluate.evaluate_split(model, frames, np.ones(3), name="extrapolation")
+    assert own["mean"]["psnr"] == pytest.approx(100.0, abs=1e-3)
+
+
+class VelocityModel:
+    """Stand-in motion model: velocity `scale · v_true`, positions `x0 + shift(t)`."""
+
+    def __init__(self, scene, scale=1.0, mu0=None, opacity=None, exact_paths=False):
+        self.scene, self.scale = scene, scale
+        self.mu0 = mu0 if mu0 is not None else np.zeros((1, 3))
+        self.opacity = opacity if opacity is not None else np.ones(len(self.mu0))
+        self.exact_paths = exact_paths
+
+    def velocity_at(self, x, t):
+        return torch.as_tensor(self.scale * self.scene.velocity(x.double().numpy(), t, margin=np.inf))
+
+    def base_positions(self, t):
+        if self.exact_paths:
+            return torch.as_tensor(self.scene.position(self.mu0, t, margin=EVAL_SURFACE_MARGIN))
+        return torch.as_tensor(self.mu0)
+
+    def gaussians_at(self, t):
+        return {"opacities": torch.as_tensor(self.opacity)}
+
+
+@pytest.mark.parametrize("scale, expected", [(1.0, 0.0), (0.0, 1.0), (2.0, 1.0), (1.5, 0.5)])
+def test_velocity_relative_error_of_scaled_fields(scale, expected):
+    scene = SCENES["toss"]()
+    error = evaluate.velocity_error(VelocityModel(scene, scale), scene, max_time=0.75)
+    assert error["points"] == evaluate.MOTION_EVAL_POINTS  # one moving body: every sample kept
+    # ‖(s − 1) v‖ / ‖v‖ = |s − 1| exactly; float32 queries: 1e-6.
+    for group in ("observed", "future", "all"):
+        assert error[group]["relative_l2"] == pytest.approx(expected, abs=1e-6)
+    assert [r["time"] for r in error["per_time"]] == pytest.approx(np.linspace(0, 1, 11))
+    assert len([r for r in error["per_time"] if r["time"] > 0.75]) == 3  # 0.8, 0.9, 1.0
+
+
+def test_velocity_points_skip_static_bodies():
+    scene = SCENES["multi"]()
+    points = evaluate.moving_surface_points(scene)
+    owner = scene.body_index(points, 0.0, margin=np.inf)
+    assert 0 < len(points) < evaluate.MOTION_EVAL_POINTS
+    assert "ground" not in {scene.bodies[k].name for k in owner}
+
+
+def test_trajectory_selection_and_errors():
+    scene = SCENES["toss"]()  # one box centred at (-0.5, 0, -0.5) at t = 0
+    box = scene.bodies[0]
+    centre = np.asarray(box.centre)
+    mu0 = np.array([
+        centre,                                          # inside: kept
+        centre + [0.0, 0.0, box.size.max() + 1.0],       # far outside: dropped
+        centre + [0.01, 0.0, 0.0],                       # inside but nearly transparent: dropped
+    ])
+    opacity = np.array([1.0, 1.0, 0.5 * ALPHA_MIN])
+    exact = evaluate.trajectory_error(VelocityModel(scene, mu0=mu0, opacity=opacity, exact_paths=True), scene, 0.75)
+    frozen = evaluate.trajectory_error(VelocityModel(scene, mu0=mu0, opacity=opacity), scene, 0.75)
+    assert exact["gaussians"] == frozen["gaussians"] == 1
+    assert exact["all"]["mean_distance"] == pytest.approx(0.0, abs=1e-12)
+    # A model that does not move scores exactly the "nothing moved" reference distance,
+    # which for the thrown box's centre is |c(t) − c(0)|.
+    for row in frozen["per_time"]:
+        assert row["mean_distance"] == pytest.approx(row["static_mean_distance"], abs=1e-12)
+        t = row["time"]
+        shift = box.motion.velocity0 * t + 0.5 * box.motion.gravity * t * t
+        assert row["mean_distance"] == pytest.approx(np.linalg.norm(shift), abs=1e-12)
+
+
+def test_no_selected_gaussian_gives_none():
+    scene = SCENES["toss"]()
+    far = np.array([[10.0, 10.0, 10.0]])
+    error = evaluate.trajectory_error(VelocityModel(scene, mu0=far), scene, 0.75)
+    assert error["gaussians"] == 0
+    assert error["all"]["mean_distance"] is None
+
+
+def test_unknown_split_is_named():
+    with pytest.raises(ValueError, match="^splits: "):
+        evaluate.evaluate_model(None, None, splits=("future",))
+
+
+def test_markdown_tables():
+    result = {
+        "max_time": 0.75,
+        "splits": {"interpolation": {"count": 1, "mean": {"psnr": 31.234, "ssim": 0.95, "lpips_alex": None,
+                                                            "lpips_vgg": None},
+                                     "frames": [{"path": "val/a.png", "time": 0.5, "psnr": 31.234, "ssim": 0.95}]}},
+        "freeze_baseline": None, "motion": None,
+    }
+    text = evaluate.metrics_markdown(result)
+    assert "| interpolation (t ≤ 0.75) | 1 | 31.23 | 0.9500 | — | — |" in text
+    assert "| val/a.png | 0.500 | 31.23 | 0.9500 | — | — |" in text

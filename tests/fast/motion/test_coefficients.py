@@ -1,0 +1,72 @@
+"""velogauss_fast.motion.coefficients: VG-COEF (w = m(z) P(t), masked) against velogauss_ref."""
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32, gradcheck_fn,
+                                     random_params, small_cfg, to_torch)
+from velogauss_fast.motion.coefficients import coefficients
+from velogauss_fast.nn import mlp, positional_encoding
+from velogauss_ref.motion import coefficients as ref
+
+times = st.sampled_from([0.0, 0.37, 1.0, -2.5, 6.0])
+
+
+@pytest.mark.spec("VG-COEF")
+@DEVICE_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), t=times, n_freqs_t=st.integers(0, 2), masked=st.booleans(),
+       n=st.sampled_from([0, 1, 6]))
+def test_reference_vs_fast(device, seed, t, n_freqs_t, masked, n):
+    cfg = small_cfg(n_freqs_t=n_freqs_t, mask=RIGID_MASK if masked else None)
+    params = random_params(seed, cfg)
+    z = np.random.default_rng(seed).standard_normal((n, cfg.code_dim))
+    args = (params, t, z, cfg)
+    # t is differentiated too: dw/dt is what the transport residual needs.
+    check_agreement(ref.coefficients, coefficients, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(ref.coefficients, coefficients, args, device)
+
+
+@pytest.mark.spec("VG-COEF")
+@DEVICE_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), t=times)
+def test_convex_combination_of_patterns_and_mask(device, seed, t):
+    cfg = small_cfg(mask=RIGID_MASK)
+    params = to_torch(random_params(seed, cfg), torch.float64, device)
+    z = torch.tensor(np.random.default_rng(seed).standard_normal((20, cfg.code_dim)) * 3, device=device)
+    w = coefficients(params, t, z, cfg)
+    unmasked = coefficients(params, t, z, small_cfg())
+    assert float(w[:, 6:].abs().max()) == 0.0
+    torch.testing.assert_close(w[:, :6], unmasked[:, :6], rtol=0, atol=0)
+    # Softmax weights make w a convex combination of the K patterns: every column lies
+    # within the patterns' range (P(t) evaluated here through the public VG-MLP/VG-ENC).
+    t_vec = torch.full((1,), float(t), dtype=torch.float64, device=device)
+    P = mlp(params["time"], positional_encoding(t_vec, cfg.n_freqs_t)).reshape(cfg.n_patterns, 12)
+    slack = 1e-12 * (1 + P.abs().max())
+    assert bool((unmasked >= P.min(0).values - slack).all() and (unmasked <= P.max(0).values + slack).all())
+    # With z-independent mixing (A = 0) every particle gets the same coefficients.
+    identical = {**params, "mix": [(torch.zeros_like(params["mix"][0][0]), params["mix"][0][1])]}
+    same_z = coefficients(identical, t, z, small_cfg())
+    torch.testing.assert_close(same_z, same_z[:1].expand_as(same_z), rtol=0, atol=1e-14)
+
+
+@pytest.mark.spec("VG-COEF")
+def test_gradcheck(device):
+    cfg = small_cfg(mask=RIGID_MASK)
+    z = np.random.default_rng(0).standard_normal((3, cfg.code_dim))
+    gradcheck_fn(coefficients, (random_params(0, cfg), 0.4, z, cfg), diff=(0, 1, 2), device=device)
+
+
+@pytest.mark.spec("VG-COEF")
+def test_rejects_bad_input():
+    cfg = small_cfg()
+    params = to_torch(random_params(0, cfg), torch.float64, "cpu")
+    z = torch.zeros(3, cfg.code_dim, dtype=torch.float64)
+    with pytest.raises(ValueError, match="^t"):
+        coefficients(params, float("nan"), z, cfg)
+    with pytest.raises(ValueError, match="^t"):
+        coefficients(params, torch.zeros(2, dtype=torch.float64), z, cfg)
+    with pytest.raises(ValueError, match="^z"):
+        coefficients(params, 0.5, torch.zeros(3, cfg.code_dim + 1, dtype=torch.float64), cfg)

@@ -1,0 +1,60 @@
+"""velogauss_fast.physics.acceleration: VG-ACC against velogauss_ref and closed forms."""
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32,
+                                     constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
+from velogauss_fast.physics.acceleration import acceleration_field
+from velogauss_ref.constants import ACC_POLY_DEGREE
+from velogauss_ref.physics import acceleration as ref
+
+
+@pytest.mark.spec("VG-ACC")
+@DEVICE_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.5, -2.0, 9.0]), masked=st.booleans(),
+       n=st.sampled_from([0, 1, 6]))
+def test_reference_vs_fast(device, seed, t, masked, n):
+    cfg = small_cfg(mask=RIGID_MASK if masked else None)
+    x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
+    args = (random_params(seed, cfg), x, t, cfg)
+    check_agreement(ref.acceleration_field, acceleration_field, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(ref.acceleration_field, acceleration_field, args, device)
+
+
+@pytest.mark.spec("VG-ACC")
+def test_polynomial_in_time(device):
+    # Every pattern's alpha = g + c1 t + c2 t^2 (translation columns only): a(x, t) = alpha[:3].
+    assert ACC_POLY_DEGREE == 2
+    acc = np.zeros((3, 12))
+    acc[0, :3] = [0.0, 0.0, -9.81]
+    acc[1, :3] = [1.0, 0.0, 0.0]
+    acc[2, :3] = [0.0, 0.5, 0.0]
+    cfg = small_cfg()
+    params = to_torch(constant_coefficient_params(0, cfg, np.zeros(12), acc=acc), torch.float64, device)
+    x = torch.tensor(np.random.default_rng(0).uniform(-1, 1, (5, 3)), device=device)
+    t = 2.0
+    expected = torch.tensor([[t, 0.5 * t * t, -9.81]] * 5, dtype=torch.float64, device=device)
+    torch.testing.assert_close(acceleration_field(params, x, t, cfg), expected, rtol=0, atol=1e-13)
+    zero = {**params, "acc": torch.zeros_like(params["acc"])}
+    assert float(acceleration_field(zero, x, t, cfg).abs().max()) == 0.0
+
+
+@pytest.mark.spec("VG-ACC")
+def test_gradcheck(device):
+    cfg = small_cfg()
+    x = np.random.default_rng(0).uniform(-1, 1, (3, 3))
+    gradcheck_fn(acceleration_field, (random_params(0, cfg), x, 0.7, cfg), diff=(0, 1, 2), device=device)
+
+
+@pytest.mark.spec("VG-ACC")
+def test_rejects_bad_input():
+    cfg = small_cfg()
+    params = to_torch(random_params(0, cfg), torch.float64, "cpu")
+    with pytest.raises(ValueError, match="^x"):
+        acceleration_field(params, torch.zeros(2, 2, dtype=torch.float64), 0.1, cfg)
+    with pytest.raises(ValueError, match="^t"):
+        acceleration_field(params, torch.zeros(2, 3, dtype=torch.float64), float("-inf"), cfg)

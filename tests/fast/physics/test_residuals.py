@@ -1,0 +1,117 @@
+"""velogauss_fast.physics.residuals: VG-TRANSPORT and VG-DIV (batched forward-mode) against
+the reference's per-point reverse-mode autograd, and closed forms."""
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32,
+                                     constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
+from velogauss_fast.physics.residuals import divergence, physics_residuals, transport_residual
+from velogauss_ref.physics import residuals as ref
+
+
+def ref_both(params, x, t, cfg):
+    return ref.transport_residual(params, x, t, cfg), ref.divergence(params, x, t, cfg)
+
+
+cases = dict(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.4, -1.5, 7.0]), masked=st.booleans(),
+             n=st.sampled_from([0, 1, 3]), n_freqs_t=st.integers(0, 2))
+
+
+def _args(seed, t, masked, n, n_freqs_t):
+    cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t)
+    x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
+    return (random_params(seed, cfg), x, t, cfg)
+
+
+# The reference differentiates per point (and twice for the gradients): a few examples suffice.
+@pytest.mark.spec("VG-TRANSPORT")
+@settings(DEVICE_SETTINGS, max_examples=10)
+@given(**cases)
+def test_transport_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
+    args = _args(seed, t, masked, n, n_freqs_t)
+    # Gradients w.r.t. params, x and t: the physics loss backpropagates through the JVPs.
+    check_agreement(ref.transport_residual, transport_residual, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(ref.transport_residual, transport_residual, args, device)
+
+
+@pytest.mark.spec("VG-DIV")
+@settings(DEVICE_SETTINGS, max_examples=10)
+@given(**cases)
+def test_divergence_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
+    args = _args(seed, t, masked, n, n_freqs_t)
+    check_agreement(ref.divergence, divergence, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(ref.divergence, divergence, args, device)
+
+
+@pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
+@settings(DEVICE_SETTINGS, max_examples=6)
+@given(**cases)
+def test_shared_jet_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
+    args = _args(seed, t, masked, n, n_freqs_t)
+    check_agreement(ref_both, physics_residuals, args, diff=(0, 1, 2), device=device, seed=seed)
+
+
+@pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
+def test_constant_coefficients_closed_form(device):
+    # Constant w: grad v = A(w), dv/dt = 0, so r = A (A x + b) - a and div = w7 + w8 + w9.
+    rng = np.random.default_rng(5)
+    w = rng.standard_normal(12)
+    acc = rng.standard_normal((3, 12))
+    cfg = small_cfg()
+    params = to_torch(constant_coefficient_params(5, cfg, w, acc=acc), torch.float64, device)
+    x = torch.tensor(rng.uniform(-1, 1, (7, 3)), device=device)
+    t = 0.3
+    A = torch.tensor([[w[6], w[9] - w[5], w[4] + w[11]],
+                      [w[9] + w[5], w[7], w[10] - w[3]],
+                      [w[11] - w[4], w[10] + w[3], w[8]]], dtype=torch.float64, device=device)
+    b = torch.tensor(w[:3], device=device)
+    alpha = torch.tensor(acc[0] + acc[1] * t + acc[2] * t * t, device=device)
+    Aa = torch.tensor([[alpha[6], alpha[9] - alpha[5], alpha[4] + alpha[11]],
+                       [alpha[9] + alpha[5], alpha[7], alpha[10] - alpha[3]],
+                       [alpha[11] - alpha[4], alpha[10] + alpha[3], alpha[8]]], dtype=torch.float64, device=device)
+    v = x @ A.T + b
+    expected_r = v @ A.T - (x @ Aa.T + alpha[:3])
+    torch.testing.assert_close(transport_residual(params, x, t, cfg), expected_r, rtol=0, atol=1e-12)
+    div = divergence(params, x, t, cfg)
+    torch.testing.assert_close(div, torch.full_like(div, w[6] + w[7] + w[8]), rtol=0, atol=1e-12)
+
+
+@pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
+def test_tensor_time_is_differentiable(device):
+    # d r / d t through a 0-d tensor time, against central differences of the residual.
+    cfg = small_cfg(n_freqs_t=1)
+    params = to_torch(random_params(7, cfg), torch.float64, device)
+    x = torch.tensor(np.random.default_rng(7).uniform(-1, 1, (4, 3)), device=device)
+    t = torch.tensor(0.35, dtype=torch.float64, device=device, requires_grad=True)
+    (g,) = torch.autograd.grad(transport_residual(params, x, t, cfg).sum(), t)
+    h = 1e-5
+    fd = (transport_residual(params, x, 0.35 + h, cfg).sum() - transport_residual(params, x, 0.35 - h, cfg).sum()) / (2 * h)
+    # Central difference: truncation ~ h^2 |r'''| ~ 1e-10, rounding ~ 1e-16 |r| / h ~ 1e-11.
+    assert abs(float(g) - float(fd)) < 1e-7 * max(1.0, abs(float(fd)))
+
+
+@pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
+def test_gradcheck(device):
+    cfg = small_cfg()
+    x = np.random.default_rng(0).uniform(-1, 1, (3, 3))
+    args = (random_params(0, cfg), x, 0.45, cfg)
+    gradcheck_fn(transport_residual, args, diff=(0, 1, 2), device=device)
+    gradcheck_fn(divergence, args, diff=(0, 1, 2), device=device)
+    gradcheck_fn(physics_residuals, args, diff=(0, 1, 2), device=device)
+
+
+@pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
+@pytest.mark.parametrize("fn", [transport_residual, divergence, physics_residuals])
+def test_rejects_bad_input(fn):
+    cfg = small_cfg()
+    params = to_torch(random_params(0, cfg), torch.float64, "cpu")
+    with pytest.raises(ValueError, match="^x"):
+        fn(params, torch.zeros(2, 4, dtype=torch.float64), 0.1, cfg)
+    with pytest.raises(ValueError, match="^x"):
+        fn(params, torch.full((2, 3), float("nan"), dtype=torch.float64), 0.1, cfg)
+    with pytest.raises(ValueError, match="^t"):
+        fn(params, torch.zeros(2, 3, dtype=torch.float64), float("nan"), cfg)

@@ -1,0 +1,1 @@
+"""Benchmarks: timings and peak memory, written to benchmarks/RESULTS.md (never run by tests)."""

@@ -1,0 +1,363 @@
+"""Rasterizer benchmark: forward+backward time and peak memory of four renderers.
+
+Methods, all on the same random scenes (float32, CPU unless --device says otherwise):
+
+* fast      -- velogauss_fast.raster.rasterize (sorted pair table, analytic backward);
+* autograd  -- the same projection, pair table and compositing formulation left to
+               autograd (velogauss_fast.raster._composite_autograd);
+* dense     -- a straightforward all-pairs renderer: every Gaussian at every pixel as
+               dense (P, N) tensors, the approach of simple pure-torch splatting code
+               (same VG-ALPHA/VG-BLEND semantics, box test included);
+* reference -- velogauss_ref.raster.rasterize with autograd gradients (NumPy, per-pixel
+               loop), on the smallest workload only.
+
+Each (method, workload) runs in a fresh subprocess: one warm-up pass, then the peak
+resident set size is reset (/proc/self/clear_refs) and `repeats` timed passes follow;
+memory is the high-water mark VmHWM minus the resident size at the reset (the scene, the
+interpreter and torch are excluded), and the absolute VmHWM is reported too.
+
+Regenerate: python -m velogauss.bench.raster   (or: velogauss bench raster)
+"""
+
+import argparse
+import json
+import math
+import os
+import platform
+import re
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+
+import torch
+
+from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+
+SECTION = "## Rasterizer"
+COMMAND = "python -m velogauss.bench.raster"
+
+
+@dataclass(frozen=True)
+class Workload:
+    name: str
+    width: int
+    height: int
+    n_gaussians: int
+
+
+WORKLOADS = {
+    "W1": Workload("W1", 64, 64, 2_000),
+    "W2": Workload("W2", 128, 128, 10_000),
+    "W3": Workload("W3", 256, 256, 50_000),
+    "W4": Workload("W4", 400, 400, 100_000),
+}
+METHODS = ("fast", "autograd", "dense", "reference")
+# The per-pixel NumPy reference is far too slow beyond the smallest workload.
+REFERENCE_WORKLOADS = ("W1",)
+# Bytes per (pixel, Gaussian) element the dense renderer keeps for backward (about 14
+# float32 tensors of shape (P, N) plus boolean masks, measured on W1): a dense run is
+# skipped when P * N times this exceeds the memory limit.
+DENSE_BYTES_PER_ELEMENT = 64
+
+
+def make_scene(workload, seed=0, dtype=torch.float32, device="cpu"):
+    """A random scene of `workload.n_gaussians` Gaussians in front of a 60-degree camera.
+
+    Means fill the view frustum between depths 2 and 6; each scale axis is drawn so that
+    its screen-space standard deviation is log-uniform in [0.2, 2] px (before EPS2D), so a
+    Gaussian covers a few to tens of pixels at every resolution. Opacities U(0.1, 0.9),
+    colours U(0, 1), random rotations. Returns the keyword arguments of `rasterize`.
+    """
+    g = torch.Generator().manual_seed(seed)
+    n, w, h = workload.n_gaussians, workload.width, workload.height
+    f = 0.5 * w / math.tan(math.radians(30.0))
+    z = 2.0 + 4.0 * torch.rand(n, generator=g, dtype=torch.float64)
+    u = w * torch.rand(n, generator=g, dtype=torch.float64)
+    v = h * torch.rand(n, generator=g, dtype=torch.float64)
+    means = torch.stack([(u - 0.5 * w) * z / f, (v - 0.5 * h) * z / f, z], dim=1)
+    sigma_px = torch.exp(math.log(0.2) + math.log(10.0) * torch.rand(n, 3, generator=g, dtype=torch.float64))
+    scene = {
+        "means": means,
+        "quats": torch.randn(n, 4, generator=g, dtype=torch.float64),
+        "scales": sigma_px * z[:, None] / f,
+        "opacities": 0.1 + 0.8 * torch.rand(n, generator=g, dtype=torch.float64),
+        "colors": torch.rand(n, 3, generator=g, dtype=torch.float64),
+        "viewmat": torch.eye(4, dtype=torch.float64),
+        "K": torch.tensor([[f, 0.0, 0.5 * w], [0.0, f, 0.5 * h], [0.0, 0.0, 1.0]], dtype=torch.float64),
+    }
+    scene = {k: t.to(dtype=dtype, device=device) for k, t in scene.items()}
+    scene.update(width=w, height=h)
+    return scene
+
+
+def dense_rasterize(means, quats, scales, opacities, colors, viewmat, K, width, height, background=None):
+    """All-pairs renderer: every valid Gaussian evaluated at every pixel as (P, N) tensors.
+
+    The textbook pure-torch splatter, kept only as the benchmark's baseline: same
+    projection, box test, VG-ALPHA skip rules and VG-BLEND early termination as
+    `velogauss_fast.raster.rasterize`, so it renders the same image, but its time and
+    memory grow with pixels x Gaussians. Gradients come from autograd.
+    """
+    from velogauss_fast.covariance import covariance_3d
+    from velogauss_fast.projection import project_gaussians
+
+    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height)
+    ids = torch.nonzero(proj["valid"]).squeeze(1)
+    ids = ids[torch.argsort(proj["depth"][ids].detach(), stable=True)]
+    mu, conic, r = proj["mean2d"][ids], proj["conic"][ids], proj["radius"][ids].to(means.dtype)
+    jj, ii = torch.meshgrid(
+        torch.arange(width, dtype=means.dtype), torch.arange(height, dtype=means.dtype), indexing="xy"
+    )
+    centres = torch.stack([jj.reshape(-1), ii.reshape(-1)], dim=1) + 0.5  # [P, 2]
+    du = centres[:, None, 0] - mu[None, :, 0]  # [P, N]
+    dv = centres[:, None, 1] - mu[None, :, 1]
+    in_box = (du.abs() <= r) & (dv.abs() <= r)
+    sigma = 0.5 * (conic[:, 0] * du * du + conic[:, 2] * dv * dv) + conic[:, 1] * du * dv
+    alpha = torch.clamp(opacities[ids] * torch.exp(-sigma), max=ALPHA_MAX)
+    alpha = torch.where(in_box & (sigma >= 0) & (alpha >= ALPHA_MIN), alpha, torch.zeros_like(alpha))
+    t_incl = torch.cumprod(1 - alpha, dim=1)
+    blended = (alpha > 0) & (t_incl >= TRANSMITTANCE_MIN)
+    t_excl = torch.cat([torch.ones_like(t_incl[:, :1]), t_incl[:, :-1]], dim=1)
+    w = torch.where(blended, alpha * t_excl, torch.zeros_like(alpha))
+    T = torch.prod(torch.where(blended, 1 - alpha, torch.ones_like(alpha)), dim=1)
+    if background is None:
+        background = means.new_zeros(3)
+    image = w @ colors[ids] + T[:, None] * background
+    return image.reshape(height, width, 3), (1 - T).reshape(height, width, 1)
+
+
+def _renderer(method):
+    """The function (scene tensors...) -> (image, alpha) that `method` times."""
+    if method == "fast":
+        from velogauss_fast.raster import rasterize
+
+        return lambda **s: rasterize(**s, backend="torch")[:2]
+    if method == "autograd":
+        from velogauss_fast.raster import _composite_autograd, _render
+
+        return lambda **s: _render(**s, background=s["means"].new_zeros(3), sh_degree=None,
+                                   composite=_composite_autograd)[:2]
+    if method == "dense":
+        return lambda **s: dense_rasterize(**s)[:2]
+    if method == "reference":
+        return _reference_renderer()
+    raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+
+
+def _reference_renderer():
+    """The NumPy reference (float64) wrapped so its autograd gradients land in the torch leaves."""
+    from autograd import make_vjp
+
+    from velogauss_ref.raster import rasterize as ref_rasterize
+
+    names = ("means", "quats", "scales", "opacities", "colors")
+
+    class _Ref(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, width, height, viewmat, K, *leaves):
+            arrays = [t.detach().double().numpy() for t in leaves]
+            vm, k = viewmat.double().numpy(), K.double().numpy()
+
+            def render(*xs):
+                image, alpha, _ = ref_rasterize(*xs, vm, k, width, height)
+                return image, alpha
+
+            ctx.vjp, (image, alpha) = make_vjp(lambda xs: render(*xs))(arrays)
+            ctx.dtype = leaves[0].dtype
+            return torch.from_numpy(image).to(ctx.dtype), torch.from_numpy(alpha).to(ctx.dtype)
+
+        @staticmethod
+        def backward(ctx, g_image, g_alpha):
+            grads = ctx.vjp((g_image.double().numpy(), g_alpha.double().numpy()))
+            return (None, None, None, None) + tuple(torch.from_numpy(g).to(ctx.dtype) for g in grads)
+
+    def run(**s):
+        return _Ref.apply(s["width"], s["height"], s["viewmat"], s["K"], *(s[k] for k in names))
+
+    return run
+
+
+def _status_kib(field):
+    with open("/proc/self/status") as f:
+        return int(re.search(rf"^{field}:\s+(\d+) kB", f.read(), re.M).group(1))
+
+
+def _worker(method, workload, repeats, device):
+    """Time `repeats` forward+backward passes of one method in this (fresh) process."""
+    scene = make_scene(WORKLOADS[workload], device=device)
+    leaves = {k: scene[k].requires_grad_() for k in ("means", "quats", "scales", "opacities", "colors")}
+    render = _renderer(method)
+    g = torch.Generator().manual_seed(1)
+    v_image = torch.rand(scene["height"], scene["width"], 3, generator=g).to(device)
+    v_alpha = torch.rand(scene["height"], scene["width"], 1, generator=g).to(device)
+
+    def step():
+        for t in leaves.values():
+            t.grad = None
+        image, alpha = render(**scene)
+        ((image * v_image).sum() + (alpha * v_alpha).sum()).backward()
+        if device != "cpu":
+            torch.cuda.synchronize()
+        return image
+
+    image = step()  # warm-up: allocator pools, lazy imports, one-time kernels
+    checksum = float(image.detach().double().sum())
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # reset VmHWM to the current resident size
+    rss0 = _status_kib("VmRSS")
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        step()
+        times.append(time.perf_counter() - t0)
+    return {
+        "method": method,
+        "workload": workload,
+        "times": times,
+        "median_s": statistics.median(times),
+        "peak_rss_mib": _status_kib("VmHWM") / 1024,
+        "peak_above_start_mib": (_status_kib("VmHWM") - rss0) / 1024,
+        "checksum": checksum,
+    }
+
+
+def _skip_reason(method, workload, memory_limit_gib):
+    wl = WORKLOADS[workload]
+    if method == "reference" and workload not in REFERENCE_WORKLOADS:
+        return "reference timed on W1 only (per-pixel Python loop)"
+    if method == "dense":
+        need = wl.width * wl.height * wl.n_gaussians * DENSE_BYTES_PER_ELEMENT / 2**30
+        if need > memory_limit_gib:
+            return f"does not fit: needs ~{need:.0f} GiB for (P, N) tensors > {memory_limit_gib:g} GiB"
+    return None
+
+
+def _measure(method, workload, repeats, device):
+    """Run one (method, workload) in a fresh interpreter; returns its result dict."""
+    cmd = [sys.executable, "-m", "velogauss.bench.raster", "--worker", method, workload,
+           "--repeats", str(repeats), "--device", device]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
+        return {"method": method, "workload": workload, "skipped": f"failed: {tail[:120]}"}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _machine():
+    cpu = "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = re.search(r"^model name\s*:\s*(.+)$", f.read(), re.M).group(1).strip()
+    except (OSError, AttributeError):
+        pass
+    return (f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} "
+            f"({torch.get_num_threads()} threads), Python {platform.python_version()}")
+
+
+def _table(results, workloads, methods):
+    by = {(r["method"], r["workload"]): r for r in results}
+    lines = [
+        "| workload | method | median fwd+bwd (s) | time / fast | peak RSS (MiB) | peak above start (MiB) | memory / fast | note |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for w in workloads:
+        wl = WORKLOADS[w]
+        fast = by.get(("fast", w))
+        for m in methods:
+            r = by.get((m, w))
+            label = f"{w} {wl.width}x{wl.height}, {wl.n_gaussians:,} G"
+            if r is None:
+                continue
+            if "skipped" in r:
+                lines.append(f"| {label} | {m} | - | - | - | - | - | {r['skipped']} |")
+                continue
+            ratio_t = ratio_m = "-"
+            if fast is not None and "skipped" not in fast:
+                ratio_t = f"{r['median_s'] / fast['median_s']:.1f}x"
+                ratio_m = f"{r['peak_above_start_mib'] / max(fast['peak_above_start_mib'], 1e-9):.1f}x"
+            note = f"{len(r['times'])} runs"
+            lines.append(
+                f"| {label} | {m} | {r['median_s']:.3f} | {ratio_t} | {r['peak_rss_mib']:.0f} | "
+                f"{r['peak_above_start_mib']:.0f} | {ratio_m} | {note} |"
+            )
+    return "\n".join(lines)
+
+
+def _write_section(out_path, text):
+    """Replace (or append) the "## Rasterizer" section of out_path, leaving other sections alone."""
+    old = ""
+    if os.path.exists(out_path):
+        with open(out_path) as f:
+            old = f.read()
+    if not old.strip():
+        old = "# Benchmarks\n"
+    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.M | re.S)
+    section = text.rstrip("\n") + "\n\n"
+    new = pattern.sub(lambda _: section, old, count=1) if pattern.search(old) else old.rstrip("\n") + "\n\n" + section
+    os.makedirs(os.path.dirname(out_path) or ".", exist_ok=True)
+    with open(out_path, "w") as f:
+        f.write(new.rstrip("\n") + "\n")
+
+
+def run(out_path="benchmarks/RESULTS.md", workloads=tuple(WORKLOADS), methods=METHODS, repeats=None,
+        memory_limit_gib=24.0, device="cpu", echo=print):
+    """Benchmark `methods` on `workloads` and write the "## Rasterizer" section of out_path.
+
+    repeats: timed passes per measurement (default 5 on W1/W2, 3 on W3/W4, 1 for the
+    reference). memory_limit_gib: dense runs whose (P, N) tensors would need more are
+    skipped. Returns the list of result dicts.
+    """
+    for w in workloads:
+        if w not in WORKLOADS:
+            raise ValueError(f"workloads: unknown workload {w!r}; expected some of {tuple(WORKLOADS)}")
+    for m in methods:
+        if m not in METHODS:
+            raise ValueError(f"methods: unknown method {m!r}; expected some of {METHODS}")
+    results = []
+    for w in workloads:
+        for m in methods:
+            reason = _skip_reason(m, w, memory_limit_gib)
+            if reason is None:
+                k = repeats or (1 if m == "reference" else 5 if w in ("W1", "W2") else 3)
+                r = _measure(m, w, k, device)
+            else:
+                r = {"method": m, "workload": w, "skipped": reason}
+            results.append(r)
+            echo(json.dumps({k: v for k, v in r.items() if k != "times"}))
+    text = "\n\n".join([
+        SECTION,
+        f"Forward + backward (loss = <image, v> + <alpha, v'>, gradients of means, quats, scales, "
+        f"opacities, colours) of one {device.upper()} float32 render; median of the timed runs after "
+        f"one warm-up, each method and workload in a fresh process. Memory: the resident-set "
+        f"high-water mark (VmHWM) during the timed runs, absolute and above the resident size "
+        f"before them (interpreter, torch and the scene excluded). Scenes: "
+        f"`velogauss.bench.raster.make_scene` (seed 0; screen-space standard deviations "
+        f"0.2-2 px per axis, opacities 0.1-0.9).",
+        f"Machine: {_machine()}.",
+        f"Regenerate: `{COMMAND}`",
+        _table(results, workloads, methods),
+    ])
+    _write_section(out_path, text)
+    return results
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worker", nargs=2, metavar=("METHOD", "WORKLOAD"), help=argparse.SUPPRESS)
+    parser.add_argument("--workloads", nargs="+", default=list(WORKLOADS))
+    parser.add_argument("--methods", nargs="+", default=list(METHODS))
+    parser.add_argument("--repeats", type=int, default=None)
+    parser.add_argument("--memory-limit-gib", type=float, default=24.0)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--out", default="benchmarks/RESULTS.md")
+    args = parser.parse_args(argv)
+    if args.worker:
+        print(json.dumps(_worker(*args.worker, args.repeats or 3, args.device)))
+        return
+    run(args.out, tuple(args.workloads), tuple(args.methods), args.repeats, args.memory_limit_gib, args.device)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,398 @@
+"""The `velogauss` command: make a synthetic scene, train, evaluate, render, export, benchmark.
+
+Every command writes into one run folder (`runs/<scene>-<YYYYmmdd-HHMMSS>` by default):
+`config.toml`, `checkpoints/`, `log.jsonl` (training), `metrics.json`, `metrics.md`
+(`velogauss eval`), `renders/` (`velogauss render`), `export/` (`velogauss export`).
+Results are written atomically (`velogauss.io_utils`).
+
+Bad input -- a missing run folder, checkpoint or image, a malformed scene file, an unknown
+`--set` key, a bad value -- prints one line `error: <what is wrong, naming the file, field
+or value>` and exits with code 2. Only the command-line boundary catches these errors
+(`DataError`, `ValueError`, `FileNotFoundError`); anything else is a bug and keeps its traceback.
+"""
+
+import contextlib
+import datetime
+import importlib
+import inspect
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from velogauss.data import DataError
+
+app = typer.Typer(
+    name="velogauss",
+    help="VeloGauss: 3D Gaussians moved by a learned, physically constrained velocity field.\n\n"
+         "Main job: `velogauss train` generates the default synthetic scene, trains on it, "
+         "evaluates interpolation and extrapolation, and renders the results.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+EXIT_BAD_INPUT = 2
+BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
+SPLIT_CHOICES = {"interp": ("interpolation",), "extrap": ("extrapolation",), "both": ("interpolation", "extrapolation")}
+
+_CONFIG_HELP = "TOML config file; its values override the defaults."
+_SET_HELP = "Override one config value, KEY=VALUE (e.g. train.iterations=300); repeatable; wins over --config."
+_DEVICE_HELP = "Torch device: cpu, cuda, cuda:1 ... (default: the run's config)."
+_LPIPS_HELP = ("Folder with the LPIPS weights alex.npz and vgg.npz (default: $VELOGAUSS_LPIPS_DIR, "
+               "then ../shared/data/lpips beside the checkout, then the standard download).")
+
+
+@contextlib.contextmanager
+def user_errors():
+    """Turn bad-input exceptions into one `error: ...` line on stderr and exit code 2."""
+    try:
+        yield
+    except FileNotFoundError as err:
+        where = f": {err.filename}" if err.filename else ""
+        _fail(f"{err.strerror or err}{where}")
+    except (DataError, ValueError) as err:
+        _fail(str(err))
+
+
+def _fail(message):
+    typer.secho(f"error: {message}", err=True, fg=typer.colors.RED)
+    raise typer.Exit(EXIT_BAD_INPUT)
+
+
+# --- make-scene ------------------------------------------------------------------------
+
+@app.command("make-scene")
+def make_scene_command(
+    name: Optional[str] = typer.Argument(None, help="Scene name (see --list)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder [default: data/NAME]."),
+    resolution: int = typer.Option(64, help="Image width and height in pixels."),
+    views: int = typer.Option(8, help="Number of cameras on the ring (2 of them held out for evaluation)."),
+    times: int = typer.Option(21, help="Number of time steps in [0, 1]."),
+    seed: int = typer.Option(0, help="Seed of the camera placement and point cloud."),
+    monocular: bool = typer.Option(False, "--monocular", help="One train camera per time step (D-NeRF style)."),
+    list_scenes: bool = typer.Option(False, "--list", help="List the scenes and their physical effects, then exit."),
+):
+    """Render a synthetic physics scene to disk in the D-NeRF layout (with ground truth in scene.json)."""
+    from velogauss.scenes import DEFAULT_SCENE, SCENES, make_scene
+
+    if list_scenes:
+        typer.echo(scene_listing(SCENES, DEFAULT_SCENE))
+        return
+    with user_errors():
+        if name is None:
+            raise ValueError(f"NAME: missing scene name; choose one of {', '.join(SCENES)} (see --list)")
+        out = out or Path("data") / name
+        path = make_scene(name, out, resolution=resolution, n_views=views, n_times=times, seed=seed,
+                          layout="monocular" if monocular else "multiview")
+    typer.echo(f"wrote scene {name!r} to {path}")
+
+
+def scene_listing(scenes, default):
+    """One line per scene: name, effects, compressibility and what moves (its builder's docstring)."""
+    lines = []
+    for key, build in scenes.items():
+        scene = build()
+        doc = (inspect.getdoc(build) or "").splitlines()[0]
+        tag = " (default)" if key == default else ""
+        kind = "incompressible" if scene.incompressible else "compressible"
+        lines.append(f"{key + tag:<18} effects: {', '.join(scene.effects):<34} {kind:<15} {doc}")
+    return "\n".join(lines)
+
+
+# --- train -----------------------------------------------------------------------------
+
+@app.command("train")
+def train_command(
+    data_dir: Optional[Path] = typer.Argument(
+        None, help="Scene folder (D-NeRF/NVFi layout). Omitted: generate the default synthetic scene into RUN_DIR/data."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder [default: runs/<scene>-<YYYYmmdd-HHMMSS>]."),
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help=_CONFIG_HELP),
+    set_: List[str] = typer.Option([], "--set", "-s", help=_SET_HELP),
+    scene: Optional[str] = typer.Option(None, help="Synthetic scene to generate when DATA_DIR is omitted [default: the default scene]."),
+    effects: Optional[str] = typer.Option(
+        None, help="Comma-separated effects the motion model may use: translation,rotation,gravity,stretch,shear,static."),
+    ablation: Optional[str] = typer.Option(None, help="full | no-pds | no-adf | no-gpc | deform-only."),
+    iterations: Optional[int] = typer.Option(None, help="Training iterations."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its latest checkpoint."),
+    max_time: Optional[float] = typer.Option(None, help="End of the observed window; later frames are the future [default 0.75]."),
+    half_res: Optional[bool] = typer.Option(None, "--half-res/--full-res", help="Halve the image resolution."),
+    background: Optional[str] = typer.Option(None, help="white | black | R,G,B in [0, 1]."),
+    device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
+    evaluate: bool = typer.Option(True, "--eval/--no-eval", help="Evaluate and render after training."),
+    lpips_weights: Optional[Path] = typer.Option(None, help=_LPIPS_HELP),
+):
+    """Train VeloGauss on a scene, then evaluate interpolation and extrapolation and render the results."""
+    from velogauss.scenes import DEFAULT_SCENE
+
+    with user_errors():
+        overrides = train_overrides(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
+                                    half_res=half_res, background=background, device=device)
+        cfg_source = config
+        if resume:
+            if out is None:
+                raise ValueError("--resume: needs --out RUN_DIR, the run to continue")
+            cfg_source = config or _existing_file(out / "config.toml", "run config")
+        if data_dir is not None and not data_dir.is_dir():
+            raise FileNotFoundError(2, "scene folder not found", str(data_dir))
+        scene_name = scene or DEFAULT_SCENE
+        run_dir = out or default_run_dir(data_dir.name if data_dir is not None else scene_name)
+        if data_dir is None and scene is None and resume:
+            data_dir = _recorded_data_dir(run_dir)
+        cfg = build_config(cfg_source, overrides + list(set_))
+        if data_dir is None:
+            data_dir = run_dir / "data"
+            if not (data_dir / "transforms_train.json").is_file():
+                typer.echo(f"generating synthetic scene {scene_name!r} into {data_dir}")
+                _make_default_scene(scene_name, data_dir)
+        cfg = with_data_dir(cfg, data_dir)
+        data = load_run_scene(cfg, data_dir)
+        typer.echo(f"training on {data_dir} ({len(data.train)} train frames) -> {run_dir}")
+        from velogauss.train.loop import train
+
+        model = train(cfg, data, run_dir, resume=resume, progress=True)
+    if not evaluate:
+        typer.echo(f"run folder: {run_dir}")
+        return
+    with user_errors():
+        _eval_and_render(run_dir, model, cfg, data, lpips_weights)
+
+
+def _make_default_scene(name, data_dir):
+    from velogauss.scenes import make_scene
+
+    make_scene(name, data_dir)
+
+
+def _eval_and_render(run_dir, model, cfg, data, lpips_weights):
+    result = run_evaluation(run_dir, model, data, SPLIT_CHOICES["both"], lpips_weights)
+    typer.echo(_headline(result, run_dir))
+    written = run_render(run_dir / "renders", model, data, fps=8)
+    typer.echo(f"renders: {run_dir / 'renders'} ({len(written)} files: sequence.gif, filmstrip.png, "
+               "velocity_field.png, trajectories.png, frames/)")
+
+
+# --- eval ------------------------------------------------------------------------------
+
+@app.command("eval")
+def eval_command(
+    run_dir: Path = typer.Argument(..., help="Run folder written by `velogauss train`."),
+    data: Optional[Path] = typer.Option(None, "--data", help="Scene folder [default: the one the run was trained on]."),
+    lpips_weights: Optional[Path] = typer.Option(None, help=_LPIPS_HELP),
+    split: str = typer.Option("both", help="interp | extrap | both."),
+    device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
+):
+    """PSNR, SSIM and LPIPS on the interpolation/extrapolation splits (plus motion errors on synthetic
+    scenes) -> RUN_DIR/metrics.json and RUN_DIR/metrics.md."""
+    with user_errors():
+        if split not in SPLIT_CHOICES:
+            raise ValueError(f"--split: expected one of {', '.join(SPLIT_CHOICES)}, got {split!r}")
+        model, cfg = load_run_model(run_dir, device)
+        scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
+        result = run_evaluation(run_dir, model, scene, SPLIT_CHOICES[split], lpips_weights)
+    typer.echo(_headline(result, run_dir))
+
+
+# --- render ----------------------------------------------------------------------------
+
+@app.command("render")
+def render_command(
+    run_dir: Path = typer.Argument(..., help="Run folder written by `velogauss train`."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder [default: RUN_DIR/renders]."),
+    fps: float = typer.Option(8.0, help="Frames per second of the animation."),
+    data: Optional[Path] = typer.Option(None, "--data", help="Scene folder [default: the one the run was trained on]."),
+    labels: bool = typer.Option(True, "--labels/--no-labels", help="Label strip and time bar on each frame."),
+    device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
+):
+    """Ground truth beside prediction over time (PNG frames, GIF, MP4 when imageio-ffmpeg is installed),
+    the learned velocity field and the Gaussians' trajectories."""
+    with user_errors():
+        if not fps > 0:
+            raise ValueError(f"--fps: expected a positive number, got {fps!r}")
+        model, cfg = load_run_model(run_dir, device)
+        scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
+        out = out or run_dir / "renders"
+        written = run_render(out, model, scene, fps=fps, label=labels)
+    typer.echo(f"wrote {len(written)} files to {out}")
+
+
+# --- export ----------------------------------------------------------------------------
+
+@app.command("export")
+def export_command(
+    run_dir: Path = typer.Argument(..., help="Run folder written by `velogauss train`."),
+    time: str = typer.Option(..., "--time", "-t", help="Normalised time (t > max_time is the extrapolated future)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="PLY file [default: RUN_DIR/export/gaussians_t<time>.ply]."),
+    device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
+):
+    """Write the Gaussians at one time as a standard 3DGS PLY file that splat viewers open."""
+    from velogauss.export import check_time, export_ply
+
+    with user_errors():
+        t = check_time(time)
+        model, _ = load_run_model(run_dir, device)
+        out = out or run_dir / "export" / f"gaussians_t{t:.3f}.ply"
+        count = export_ply(model, t, out)
+    typer.echo(f"wrote {count} Gaussians at t={t:g} to {out}")
+
+
+# --- bench -----------------------------------------------------------------------------
+
+BENCHMARKS = ("raster", "motion")
+
+
+@app.command("bench")
+def bench_command(
+    which: str = typer.Argument(..., help="raster | motion."),
+    out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
+    device: str = typer.Option("cpu", help="Torch device to benchmark on."),
+):
+    """Run a benchmark (velogauss.bench.raster or velogauss.bench.motion) and record it in RESULTS.md."""
+    with user_errors():
+        if which not in BENCHMARKS:
+            raise ValueError(f"WHICH: expected one of {', '.join(BENCHMARKS)}, got {which!r}")
+        module = importlib.import_module(f"velogauss.bench.{which}")
+        # The results file is each benchmark's first parameter (named out_path or out).
+        module.run(str(out), device=device)
+    typer.echo(f"results: {out}")
+
+
+# --- helpers shared by the commands ----------------------------------------------------
+
+def train_overrides(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
+                    device=None):
+    """The `--set`-style overrides `KEY=VALUE` that the real `train` flags stand for (None: not given).
+
+    Raises ValueError naming the flag for a malformed `--background` or `--effects`.
+    """
+    pairs = {
+        "model.effects": None if effects is None else _effects_list(effects),
+        "model.ablation": ablation,
+        "train.iterations": iterations,
+        "data.max_time": max_time,
+        "data.half_res": half_res,
+        "data.background": None if background is None else list(parse_background(background)),
+        "train.device": device,
+    }
+    return [f"{key}={_toml_value(value)}" for key, value in pairs.items() if value is not None]
+
+
+def parse_background(text):
+    """`white`, `black` or `R,G,B` (each in [0, 1]) → an RGB tuple; ValueError naming `--background`."""
+    if text.lower() in BACKGROUNDS:
+        return BACKGROUNDS[text.lower()]
+    try:
+        rgb = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or not all(0.0 <= v <= 1.0 for v in rgb):
+        raise ValueError(f"--background: expected white, black or R,G,B with values in [0, 1], got {text!r}")
+    return rgb
+
+
+def default_run_dir(scene_name, now=None):
+    """`runs/<scene>-<YYYYmmdd-HHMMSS>` (local time)."""
+    stamp = (now or datetime.datetime.now()).strftime("%Y%m%d-%H%M%S")
+    return Path("runs") / f"{scene_name}-{stamp}"
+
+
+def _effects_list(text):
+    from velogauss.scenes import EFFECTS
+
+    names = [e.strip() for e in text.split(",") if e.strip()]
+    unknown = [e for e in names if e not in EFFECTS]
+    if unknown or not names:
+        raise ValueError(f"--effects: unknown effect(s) {unknown or [text]}; choose from {', '.join(EFFECTS)}")
+    return names
+
+
+def _toml_value(value):
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)
+
+
+def build_config(path, overrides):
+    """The training config: defaults, then the TOML file `path` (if any), then `overrides`."""
+    if path is not None:
+        _existing_file(path, "config file")
+    from velogauss.config import load_config
+
+    return load_config(path, overrides)
+
+
+def with_data_dir(cfg, data_dir):
+    """`cfg` with the scene folder recorded, so `eval` and `render` find it again."""
+    raise NotImplementedError
+
+
+def _recorded_data_dir(run_dir):
+    raise NotImplementedError
+
+
+def load_run_model(run_dir, device=None):
+    """`(model, cfg)` of a trained run; FileNotFoundError naming the missing folder or checkpoint."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise FileNotFoundError(2, "run folder not found", str(run_dir))
+    _existing_file(run_dir / "checkpoints" / "latest.pt", "no checkpoint in the run folder (train it first)")
+    from velogauss.train.checkpoint import load_model
+
+    return load_model(run_dir, device or _default_device())
+
+
+def _default_device():
+    import torch
+
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def load_run_scene(cfg, data_dir):
+    """The run's scene, loaded with the run's observed window, resolution and background."""
+    from velogauss.data import load_scene
+
+    raise NotImplementedError
+
+
+def run_evaluation(run_dir, model, scene, splits, lpips_weights):
+    """Evaluate, write `run_dir/metrics.json` and `run_dir/metrics.md` atomically; return the result."""
+    from velogauss.evaluate import evaluate_model, metrics_markdown
+    from velogauss.io_utils import write_json, write_text
+    from velogauss.scenes import load_ground_truth
+
+    ground_truth = load_ground_truth(scene.root) if scene.metadata and "scene" in scene.metadata else None
+    result = {"run": str(run_dir), "data": str(scene.root),
+              **evaluate_model(model, scene, splits, lpips_weights, ground_truth, progress=True)}
+    write_json(Path(run_dir) / "metrics.json", result)
+    write_text(Path(run_dir) / "metrics.md", metrics_markdown(result, title=f"Metrics of {Path(run_dir).name}"))
+    return result
+
+
+def run_render(out_dir, model, scene, fps=8.0, label=True):
+    """Write the pictures of `velogauss.visualize.render_run`; return their paths."""
+    from velogauss.scenes import load_ground_truth
+    from velogauss.visualize import render_run
+
+    ground_truth = load_ground_truth(scene.root) if scene.metadata and "scene" in scene.metadata else None
+    return render_run(model, scene, out_dir, fps=fps, ground_truth=ground_truth, label=label, progress=True)
+
+
+def _headline(result, run_dir):
+    from velogauss.evaluate import summary_markdown
+
+    return f"\n{summary_markdown(result)}\nmetrics: {Path(run_dir) / 'metrics.md'} and metrics.json"
+
+
+def _existing_file(path, what):
+    if not Path(path).is_file():
+        raise FileNotFoundError(2, f"{what} not found", str(path))
+    return Path(path)
+
+
+if __name__ == "__main__":
+    app()

@@ -1,0 +1,13 @@
+"""Datasets: cameras in the spec's conventions, the D-NeRF/NVFi loader, point clouds.
+
+`load_scene(path, max_time=0.75, half_res=False, background=(1, 1, 1)) -> SceneData`
+validates a whole scene folder up front and raises one `DataError` (a ValueError naming
+the file and field) for bad data.
+"""
+
+from velogauss.data.cameras import Camera
+from velogauss.data.dnerf import Frame, SceneData, load_scene
+from velogauss.data.errors import DataError
+from velogauss.data.ply import PointCloud, read_ply, write_ply
+
+__all__ = ["Camera", "DataError", "Frame", "PointCloud", "SceneData", "load_scene", "read_ply", "write_ply"]

@@ -1,0 +1,386 @@
+"""Load a dynamic scene in the D-NeRF / NVFi layout, validated in full before training.
+
+Layout (paths relative to the scene folder):
+
+- `transforms_train.json`, `transforms_test.json` (required), `transforms_val.json`
+  (optional). Each holds intrinsics -- `camera_angle_x`, or `fl_x, fl_y, cx, cy` -- and
+  optionally `w`, `h`, at the top level or per frame (a frame's value wins), plus either
+  `frames: [{file_path, time, transform_matrix}, ...]` (D-NeRF; one camera per frame, so
+  monocular sequences work as they are) or `data: {camera: {transform_matrix, frames:
+  [{file_path, time}, ...]}}` (NVFi; where a frame has no `time`, the NVFi loader's
+  `index / (n − 1)` within its camera is used).
+- `file_path` with or without extension; without one (or when the file is missing),
+  `.png`, `.jpg`, `.jpeg` are tried in that order.
+- `transform_matrix`: 4×4 camera-to-world, Blender/OpenGL axes; converted at load
+  (spec/conventions.md, "Cameras"). `time` in [0, 1].
+- Images: PNG or JPEG, grey, grey+alpha, RGB or RGBA, decoded by Pillow; integer pixels
+  are divided by their type's maximum. Alpha is composited over `background`:
+  `rgb·a + background·(1 − a)`.
+- Optional `points3d.ply` (initial point cloud) and `scene.json` (metadata written by
+  `velogauss.scenes.writer`; its `bounds` are the scene's box).
+
+Splits by time, with `max_time` the end of the observed window:
+`train` = train frames with `t ≤ max_time`; `interpolation` = val frames with
+`t ≤ max_time`, plus test frames with `t ≤ max_time` whose (pose, time) is not a train
+or val frame's; `extrapolation` = test frames with `t > max_time`. Val and train frames after
+`max_time` are not used (the test file is the designated future set).
+"""
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+
+from velogauss.data.cameras import Camera, check_rigid, intrinsics_from_focal, intrinsics_from_fov
+from velogauss.data.errors import DataError
+from velogauss.data.ply import read_ply
+
+_SPLIT_FILES = {"train": "transforms_train.json", "val": "transforms_val.json", "test": "transforms_test.json"}
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One image: `image (H, W, 3)` float32 in [0, 1] (composited), normalised `time`,
+    its `camera`, and the image file's `path`."""
+
+    image: np.ndarray
+    time: float
+    camera: Camera
+    path: str
+
+
+@dataclass(frozen=True, eq=False)
+class SceneData:
+    """A loaded, validated scene.
+
+    `train`, `interpolation`, `extrapolation`: lists of `Frame` (see the module docstring
+    for how they are split). `bounds (2, 3)`: an axis-aligned box `[min, max]` in world
+    units -- `scene.json`'s `bounds` if present, else the box of the `points3d.ply` points,
+    else the box the cameras look at (`camera_focus_bounds`). `background (3,)` float32.
+    `points (N, 3)` / `point_colors (N, 3)`: the PLY cloud, or None. `metadata`: the parsed
+    `scene.json`, or None. `root`: the scene folder.
+    """
+
+    train: list
+    interpolation: list
+    extrapolation: list
+    bounds: np.ndarray
+    background: np.ndarray
+    max_time: float
+    points: np.ndarray | None
+    point_colors: np.ndarray | None
+    metadata: dict | None
+    root: Path
+
+    @property
+    def width(self):
+        """Image width in pixels (the same for every frame)."""
+        return self.train[0].camera.width
+
+    @property
+    def height(self):
+        """Image height in pixels (the same for every frame)."""
+        return self.train[0].camera.height
+
+
+def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
+    """Load and validate a D-NeRF/NVFi scene folder into a `SceneData`.
+
+    `path`: the scene folder. `max_time` in (0, 1): end of the observed window.
+    `half_res`: halve the resolution by 2×2 area averaging of the composited images
+    (odd trailing rows/columns cropped; `fx, fy, cx, cy` halved). `background (3,)` in
+    [0, 1]: colour behind transparent pixels.
+
+    Every file is read and checked up front; the first problem raises one `DataError`
+    naming the file and field: missing file or key, unreadable image, images of different
+    sizes or disagreeing with `w`/`h`, non-finite or non-rigid (singular, scaled) pose,
+    time outside [0, 1], an empty `train` or `extrapolation` split (with the times found),
+    a malformed `points3d.ply` or `scene.json`. Bad arguments raise `DataError` naming the
+    argument (a ValueError, like every bad-input error).
+    """
+    max_time = _check_max_time(max_time)
+    background = _check_background(background)
+    if not isinstance(half_res, (bool, np.bool_)):
+        raise DataError(None, "half_res", f"expected True or False, got {half_res!r}")
+    root = Path(path)
+    if not root.is_dir():
+        raise DataError(root, "path", "scene folder does not exist")
+    records = {}
+    for split, name in _SPLIT_FILES.items():
+        file = root / name
+        if not file.is_file():
+            if split == "val":
+                records[split] = []
+                continue
+            raise DataError(file, "file", f"missing; a scene needs {_SPLIT_FILES['train']} and {_SPLIT_FILES['test']}")
+        records[split] = _read_transforms(file)
+    train = [r for r in records["train"] if r["time"] <= max_time]
+    if not train:
+        raise DataError(root / _SPLIT_FILES["train"], "frames",
+                        f"empty train split: no frame with time <= max_time={max_time} ({_span(records['train'])})")
+    extrapolation = [r for r in records["test"] if r["time"] > max_time]
+    if not extrapolation:
+        raise DataError(root / _SPLIT_FILES["test"], "frames",
+                        f"empty extrapolation split: no frame with time > max_time={max_time} "
+                        f"({_span(records['test'])}); future frames are needed to evaluate extrapolation")
+    interpolation = [r for r in records["val"] if r["time"] <= max_time]
+    # A test frame inside the window that repeats a train or val (pose, time) is no new view.
+    seen = {_pose_time_key(r) for r in train + interpolation}
+    interpolation += [r for r in records["test"] if r["time"] <= max_time and _pose_time_key(r) not in seen]
+
+    cloud = read_ply(root / "points3d.ply") if (root / "points3d.ply").is_file() else None
+    metadata = _read_metadata(root / "scene.json")
+
+    size = None
+    loaded = {}
+    for split, group in (("train", train), ("interpolation", interpolation), ("extrapolation", extrapolation)):
+        frames = []
+        for record in group:
+            image = _load_image(record, background)
+            if size is None:
+                size = (image.shape[0], image.shape[1], record)
+            elif image.shape[:2] != size[:2]:
+                raise DataError(record["image"], "file_path",
+                                f"image is {image.shape[1]}x{image.shape[0]} but {size[2]['image']} is "
+                                f"{size[1]}x{size[0]}; all images must have the same size")
+            camera = _camera(record, image.shape[1], image.shape[0])
+            if half_res:
+                image = _halve(image)
+                camera = camera.downsampled(2)
+            frames.append(Frame(image, record["time"], camera, str(record["image"])))
+        loaded[split] = frames
+
+    if metadata is not None and "bounds" in metadata:
+        bounds = metadata["bounds"]
+    elif cloud is not None and len(cloud.points):
+        bounds = np.stack([cloud.points.min(axis=0), cloud.points.max(axis=0)])
+    else:
+        bounds = camera_focus_bounds([f.camera for f in loaded["train"]])
+    return SceneData(
+        train=loaded["train"],
+        interpolation=loaded["interpolation"],
+        extrapolation=loaded["extrapolation"],
+        bounds=np.asarray(bounds, dtype=np.float64),
+        background=background,
+        max_time=max_time,
+        points=None if cloud is None else cloud.points,
+        point_colors=None if cloud is None else cloud.colors,
+        metadata=metadata,
+        root=root,
+    )
+
+
+def camera_focus_bounds(cameras):
+    """The box the cameras look at: centred on the least-squares closest point to all optical
+    axes, half-size the mean camera distance to it times `tan(fov_x / 2)` (half the width
+    the image spans at that depth). `cameras`: a non-empty list of `Camera`. Returns `(2, 3)`.
+
+    Parallel optical axes have no closest point; lstsq's minimum-norm solution is used then.
+    """
+    centres = np.stack([c.centre for c in cameras])
+    dirs = np.stack([c.forward for c in cameras])
+    projectors = np.eye(3) - dirs[:, :, None] * dirs[:, None, :]
+    focus = np.linalg.lstsq(projectors.sum(axis=0), np.einsum("nij,nj->i", projectors, centres), rcond=None)[0]
+    half = np.mean([np.linalg.norm(c.centre - focus) * np.tan(0.5 * c.fov_x) for c in cameras])
+    return np.stack([focus - half, focus + half])
+
+
+def _check_max_time(max_time):
+    if isinstance(max_time, bool) or not isinstance(max_time, (int, float, np.integer, np.floating)):
+        raise DataError(None, "max_time", f"expected a number in (0, 1), got {max_time!r}")
+    if not 0.0 < float(max_time) < 1.0:
+        raise DataError(None, "max_time",
+                        f"expected a number in (0, 1) so that train and future frames exist, got {max_time!r}")
+    return float(max_time)
+
+
+def _check_background(background):
+    value = np.asarray(background, dtype=np.float64) if np.ndim(background) else None
+    if value is None or value.shape != (3,) or not np.all(np.isfinite(value)) or value.min() < 0 or value.max() > 1:
+        raise DataError(None, "background", f"expected an RGB triple in [0, 1], got {background!r}")
+    return value.astype(np.float32)
+
+
+def _span(records):
+    if not records:
+        return "the file lists no frames"
+    times = [r["time"] for r in records]
+    return f"{len(times)} frames with times in [{min(times):.4g}, {max(times):.4g}]"
+
+
+def _pose_time_key(record):
+    return (record["time"], record["c2w"].tobytes())
+
+
+def _read_transforms(file):
+    try:
+        meta = json.loads(file.read_text())
+    except OSError as err:
+        raise DataError(file, "file", f"cannot read ({err.strerror or err})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise DataError(file, "file", f"not valid JSON ({err})") from None
+    if not isinstance(meta, dict):
+        raise DataError(file, "file", "expected a JSON object at the top level")
+    if "frames" in meta:
+        frames = meta["frames"]
+        if not isinstance(frames, list):
+            raise DataError(file, "frames", "expected a list of frames")
+        entries = [(f"frames[{k}]", frame, None, None) for k, frame in enumerate(frames)]
+    elif "data" in meta and isinstance(meta["data"], dict):
+        entries = []
+        for cam, block in meta["data"].items():
+            where = f"data.{cam}"
+            if not isinstance(block, dict) or not isinstance(block.get("frames"), list):
+                raise DataError(file, f"{where}.frames", "missing or not a list")
+            if "transform_matrix" not in block:
+                raise DataError(file, f"{where}.transform_matrix", "missing key")
+            n = len(block["frames"])
+            for k, frame in enumerate(block["frames"]):
+                default_time = k / (n - 1) if n > 1 else 0.0
+                entries.append((f"{where}.frames[{k}]", frame, block["transform_matrix"], default_time))
+    else:
+        raise DataError(file, "frames", "missing key (neither D-NeRF 'frames' nor NVFi 'data')")
+    return [_read_frame(file, meta, *entry) for entry in entries]
+
+
+def _read_frame(file, meta, where, frame, shared_pose, default_time):
+    if not isinstance(frame, dict):
+        raise DataError(file, where, "expected an object")
+    if "file_path" not in frame or not isinstance(frame["file_path"], str):
+        raise DataError(file, f"{where}.file_path", "missing key or not a string")
+    pose = frame.get("transform_matrix", shared_pose)
+    if pose is None:
+        raise DataError(file, f"{where}.transform_matrix", "missing key")
+    c2w = _number_array(file, f"{where}.transform_matrix", pose, (4, 4))
+    try:
+        check_rigid("transform_matrix", c2w)
+    except ValueError as err:
+        raise DataError(file, f"{where}.transform_matrix", str(err).split(": ", 1)[-1]) from None
+    if "time" in frame:
+        time = _number(file, f"{where}.time", frame["time"])
+    elif default_time is not None:
+        time = default_time
+    else:
+        raise DataError(file, f"{where}.time", "missing key")
+    if not 0.0 <= time <= 1.0:
+        raise DataError(file, f"{where}.time", f"time {time!r} is outside [0, 1]")
+    intrinsics = {}
+    for key in ("camera_angle_x", "fl_x", "fl_y", "cx", "cy", "w", "h"):
+        if key in frame:
+            field, value = f"{where}.{key}", frame[key]
+        elif key in meta:
+            field, value = key, meta[key]
+        else:
+            continue
+        intrinsics[key] = (_number(file, field, value), field)
+    if "camera_angle_x" not in intrinsics and "fl_x" not in intrinsics:
+        raise DataError(file, "camera_angle_x", "missing key (need camera_angle_x or fl_x, fl_y, cx, cy)")
+    return {"file": file, "where": where, "time": time, "c2w": c2w, "intrinsics": intrinsics,
+            "image": _resolve_image(file, where, frame["file_path"])}
+
+
+def _number(file, field, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DataError(file, field, f"expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise DataError(file, field, f"non-finite value {value!r}")
+    return float(value)
+
+
+def _number_array(file, field, value, shape):
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(file, field, f"expected a {shape[0]}x{shape[1]} array of numbers") from None
+    if array.shape != shape:
+        raise DataError(file, field, f"expected shape {shape}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise DataError(file, field, "contains non-finite values (NaN or inf)")
+    return array
+
+
+def _resolve_image(file, where, file_path):
+    base = (file.parent / file_path).resolve()
+    candidates = [base] if base.suffix.lower() in _IMAGE_SUFFIXES else []
+    candidates += [base.with_name(base.name + suffix) for suffix in _IMAGE_SUFFIXES]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    raise DataError(file, f"{where}.file_path",
+                    f"image {file_path!r} not found (tried {', '.join(c.name for c in candidates)} in {base.parent})")
+
+
+def _load_image(record, background):
+    path = record["image"]
+    try:
+        raw = iio.imread(path, plugin="pillow")
+    except Exception as err:  # imageio raises many plugin-specific types for corrupt files
+        raise DataError(path, "file_path", f"unreadable image ({type(err).__name__}: {err})") from None
+    if raw.dtype.kind == "u":
+        image = raw.astype(np.float32) / np.float32(np.iinfo(raw.dtype).max)
+    elif raw.dtype.kind == "f":
+        image = raw.astype(np.float32)
+    else:
+        raise DataError(path, "file_path", f"unsupported pixel type {raw.dtype}")
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
+        raise DataError(path, "file_path", f"expected a grey, grey+alpha, RGB or RGBA image, got shape {raw.shape}")
+    if not np.all(np.isfinite(image)):
+        raise DataError(path, "file_path", "image contains non-finite values")
+    channels = image.shape[2]
+    rgb = np.repeat(image[..., :1], 3, axis=2) if channels in (1, 2) else image[..., :3]
+    if channels in (2, 4):
+        alpha = image[..., -1:]
+        rgb = rgb * alpha + background * (1.0 - alpha)
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+def _camera(record, width, height):
+    file, intr = record["file"], record["intrinsics"]
+    for key, actual in (("w", width), ("h", height)):
+        if key in intr and intr[key][0] != actual:
+            raise DataError(file, intr[key][1], f"says {intr[key][0]:g} pixels but {record['image']} has {actual}")
+    if "fl_x" in intr:
+        missing = [k for k in ("fl_y", "cx", "cy") if k not in intr]
+        if missing:
+            raise DataError(file, missing[0], "missing key (fl_x is given, so fl_y, cx, cy are needed)")
+        for key in ("fl_x", "fl_y"):
+            if intr[key][0] <= 0:
+                raise DataError(file, intr[key][1], f"focal length must be > 0 pixels, got {intr[key][0]!r}")
+        K = intrinsics_from_focal(intr["fl_x"][0], intr["fl_y"][0], intr["cx"][0], intr["cy"][0])
+    else:
+        fov, field = intr["camera_angle_x"]
+        if not 0.0 < fov < math.pi:
+            raise DataError(file, field, f"expected a field of view in (0, pi) radians, got {fov!r}")
+        K = intrinsics_from_fov(fov, width, height)
+    return Camera.from_c2w_opengl(record["c2w"], K, width, height)
+
+
+def _halve(image):
+    h, w = image.shape[0] // 2, image.shape[1] // 2
+    if h == 0 or w == 0:
+        raise DataError(None, "half_res", f"image of {image.shape[1]}x{image.shape[0]} pixels is too small to halve")
+    blocks = image[:2 * h, :2 * w].reshape(h, 2, w, 2, 3)
+    return blocks.mean(axis=(1, 3), dtype=np.float32)
+
+
+def _read_metadata(file):
+    if not file.is_file():
+        return None
+    try:
+        meta = json.loads(file.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise DataError(file, "file", f"not readable JSON ({err})") from None
+    if not isinstance(meta, dict):
+        raise DataError(file, "file", "expected a JSON object at the top level")
+    if "bounds" in meta:
+        bounds = _number_array(file, "bounds", meta["bounds"], (2, 3))
+        if np.any(bounds[0] > bounds[1]):
+            raise DataError(file, "bounds", f"min {bounds[0].tolist()} exceeds max {bounds[1].tolist()}")
+        meta["bounds"] = bounds
+    return meta

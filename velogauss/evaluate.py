@@ -1,0 +1,314 @@
+"""Evaluate a trained run: image metrics on the interpolation and extrapolation splits, a
+"freeze the last observed frame" baseline, and, for synthetic scenes, the error of the
+learned motion against the analytic ground truth.
+
+Image metrics (spec/losses_metrics.md): PSNR (VG-METRIC, capped at 100 dB), SSIM
+(VG-METRIC-SSIM) and LPIPS v0.1 with the AlexNet and VGG backbones (VG-METRIC-LPIPS), per
+frame and as the mean over the split's frames.
+
+Freeze baseline: every extrapolation frame is compared with the model rendered from that
+frame's camera at `t = max_time` -- the last observed instant, held still. The gap between
+it and the model's own extrapolation is what the learned physics buys.
+
+Motion metrics (only when the scene folder holds a generated `scene.json`; ground truth
+from `velogauss.scenes.load_ground_truth`), at the times `MOTION_EVAL_TIMES` (11 evenly
+spaced times in [0, 1]; those `> max_time` are the future):
+
+- velocity: `MOTION_EVAL_POINTS` points `x0` are sampled on the surfaces of the bodies at
+  t = 0 (`AnalyticScene.sample_surface`, fixed seed) and the samples on bodies that do not
+  move (static motion) are dropped. At each time t the points are carried to their true
+  positions `x = position(x0, t)` and the learned field is compared with the true one:
+  `relative L2 error(t) = ‖velocity_at(x, t) − v_gt(x, t)‖ / ‖v_gt(x, t)‖`, norms over all
+  points and components (Frobenius); a time where `v_gt` is identically zero has no
+  relative error (None) and is left out of the means. Also reported: the mean per-point
+  error `mean_i |velocity_at(x_i, t) − v_gt(x_i, t)|` (world units per unit time).
+  Predicting zero velocity gives a relative error of exactly 1.
+- trajectories: the Gaussians whose canonical mean `μ0 = base_positions(0)` lies inside
+  or within `EVAL_SURFACE_MARGIN` (world units) of a moving body at t = 0 and whose opacity
+  is at least `ALPHA_MIN` (lower opacities never reach a pixel, VG-ALPHA) are followed:
+  `error(t) = mean_i |base_positions(t)_i − position(μ0_i, t)|` (world units), the
+  physics-only trajectory (VG-TRAJ, without the auxiliary deformation) against the true
+  path of the material point at `μ0`. Reported next to it: `mean_i |position(μ0_i, t) − μ0_i|`,
+  the error a model that does not move at all would have.
+
+Means are taken over the observed times (`t ≤ max_time`), the future times and all times.
+"""
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from velogauss.io_utils import to_numpy
+from velogauss.scenes.motions import StaticMotion
+from velogauss_fast import metrics
+from velogauss_ref.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN
+
+IMAGE_METRICS = ("psnr", "ssim", "lpips_alex", "lpips_vgg")
+LPIPS_NETS = {"lpips_alex": "alex", "lpips_vgg": "vgg"}
+SPLITS = ("interpolation", "extrapolation")
+MOTION_EVAL_TIMES = tuple(np.linspace(0.0, 1.0, 11).tolist())
+MOTION_EVAL_POINTS = 2000
+MOTION_EVAL_SEED = 0
+
+
+def frame_metrics(pred, gt, lpips_weights=None, with_lpips=True):
+    """PSNR, SSIM and (unless `with_lpips` is False) both LPIPS values of one image pair.
+
+    `pred`, `gt`: `H×W×3` arrays or tensors in [0, 1]; `pred` is clipped to [0, 1] first,
+    as an 8-bit image of it would be. `lpips_weights`: folder of the LPIPS `.npz` weights
+    or None (then `$VELOGAUSS_LPIPS_DIR`, `../shared/data/lpips`, the download). Returns a
+    dict of floats keyed by `IMAGE_METRICS` (LPIPS keys absent without LPIPS).
+    Raises ValueError naming `pred`/`gt` when the shapes differ.
+    """
+    pred_t, gt_t = _image_tensor("pred", pred), _image_tensor("gt", gt)
+    if pred_t.shape != gt_t.shape:
+        raise ValueError(f"pred: shape {tuple(pred_t.shape)} differs from gt's {tuple(gt_t.shape)}")
+    pred_t = pred_t.clamp(0.0, 1.0)
+    with torch.no_grad():
+        row = {"psnr": float(metrics.psnr(pred_t, gt_t)), "ssim": float(metrics.ssim(pred_t, gt_t))}
+        if with_lpips:
+            for key, net in LPIPS_NETS.items():
+                row[key] = float(metrics.lpips(pred_t, gt_t, net=net, weights_dir=lpips_weights))
+    return row
+
+
+def mean_metrics(rows):
+    """Mean of each metric over the per-frame dicts `rows`; None for a metric no row has
+    (and for an empty split)."""
+    means = {}
+    for key in IMAGE_METRICS:
+        values = [r[key] for r in rows if key in r]
+        means[key] = float(np.mean(values)) if values else None
+    return means
+
+
+def render_frames(model, frames, background, time=None, progress=False, desc="render"):
+    """Render `model` from each frame's camera; return a list of `H×W×3` float32 arrays.
+
+    `time`: None renders each frame at its own time; a number renders every frame at that
+    time (the freeze baseline). `background (3,)`: colour behind the Gaussians.
+    """
+    images = []
+    bg = torch.as_tensor(np.asarray(background, dtype=np.float32))
+    with torch.no_grad():
+        for frame in tqdm(frames, desc=desc, disable=not progress, leave=False):
+            image, _, _ = model.render(frame.camera, frame.time if time is None else time, bg)
+            images.append(to_numpy(image).astype(np.float32))
+    return images
+
+
+def evaluate_split(model, frames, background, lpips_weights=None, progress=False, name="split"):
+    """Render and score one split: `{"frames": [{"path", "time", psnr, ssim, lpips_*}], "mean": {...},
+    "count"}`; an empty split gives no frames and None means."""
+    preds = render_frames(model, frames, background, progress=progress, desc=f"render {name}")
+    rows = []
+    for frame, pred in tqdm(list(zip(frames, preds)), desc=f"score {name}", disable=not progress, leave=False):
+        rows.append({"path": str(frame.path), "time": float(frame.time),
+                     **frame_metrics(pred, frame.image, lpips_weights)})
+    return {"count": len(rows), "mean": mean_metrics(rows), "frames": rows}
+
+
+def freeze_baseline(model, frames, background, max_time, progress=False):
+    """PSNR and SSIM of the future frames against the model held still at `t = max_time`.
+
+    Returns `{"time": max_time, "count", "mean": {"psnr", "ssim"}, "frames": [...]}`.
+    """
+    preds = render_frames(model, frames, background, time=max_time, progress=progress, desc="render frozen")
+    rows = [{"path": str(f.path), "time": float(f.time), **frame_metrics(p, f.image, with_lpips=False)}
+            for f, p in zip(frames, preds)]
+    return {"time": float(max_time), "count": len(rows), "mean": mean_metrics(rows), "frames": rows}
+
+
+def moving_surface_points(scene, n_points=MOTION_EVAL_POINTS, seed=MOTION_EVAL_SEED):
+    """Points `(M, 3)` on the surfaces of the moving bodies of `scene` (an `AnalyticScene`) at t = 0.
+
+    `n_points` are drawn over all bodies with a fixed seed, then those on static bodies are
+    dropped (M ≤ n_points). A surface point belongs to the body it was drawn from, which is
+    its nearest body (the catalog's bodies do not touch), hence `margin = inf`.
+    """
+    points, _, _ = scene.sample_surface(n_points, np.random.default_rng(seed))
+    owner = scene.body_index(points, 0.0, margin=np.inf)
+    return points[_moving(scene, owner)]
+
+
+def velocity_error(model, scene, max_time, times=MOTION_EVAL_TIMES, points=None):
+    """Error of `model.velocity_at` against the ground-truth velocity on the moving surfaces.
+
+    See the module docstring for the definition. `points`: canonical surface points
+    `(M, 3)` (default `moving_surface_points(scene)`). Returns `{"per_time": [{"time",
+    "relative_l2", "mean_abs"}], "observed"/"future"/"all": {"relative_l2", "mean_abs"},
+    "points": M}`.
+    """
+    x0 = moving_surface_points(scene) if points is None else np.asarray(points, dtype=np.float64)
+    rows = []
+    for t in times:
+        x = scene.position(x0, t, margin=np.inf)
+        v_gt = scene.velocity(x, t, margin=np.inf)
+        v = query(model.velocity_at, t, x)
+        gt_norm = np.linalg.norm(v_gt)
+        rows.append({
+            "time": float(t),
+            "relative_l2": float(np.linalg.norm(v - v_gt) / gt_norm) if gt_norm > 0 else None,
+            "mean_abs": float(np.mean(np.linalg.norm(v - v_gt, axis=1))) if len(x0) else None,
+        })
+    return {"points": int(len(x0)), "per_time": rows, **_time_means(rows, max_time, ("relative_l2", "mean_abs"))}
+
+
+def trajectory_error(model, scene, max_time, times=MOTION_EVAL_TIMES):
+    """Distance between the Gaussians' physics trajectories and the true material paths.
+
+    See the module docstring for the selection of Gaussians and the definition. Returns
+    `{"gaussians": M, "per_time": [{"time", "mean_distance", "static_mean_distance"}],
+    "observed"/"future"/"all": {...}}`; with no Gaussian selected the distances are None.
+    """
+    mu0 = query(model.base_positions, 0.0)
+    opacity = query(lambda t: model.gaussians_at(t)["opacities"], 0.0).reshape(-1)
+    owner = scene.body_index(mu0, 0.0, margin=EVAL_SURFACE_MARGIN)
+    keep = (owner >= 0) & (opacity >= ALPHA_MIN)
+    keep[keep] = _moving(scene, owner[keep])
+    rows = []
+    for t in times:
+        gt = scene.position(mu0[keep], t, margin=EVAL_SURFACE_MARGIN)
+        x = query(model.base_positions, t)[keep]
+        any_kept = bool(keep.any())
+        rows.append({
+            "time": float(t),
+            "mean_distance": float(np.mean(np.linalg.norm(x - gt, axis=1))) if any_kept else None,
+            "static_mean_distance": float(np.mean(np.linalg.norm(mu0[keep] - gt, axis=1))) if any_kept else None,
+        })
+    means = _time_means(rows, max_time, ("mean_distance", "static_mean_distance"))
+    return {"gaussians": int(keep.sum()), "per_time": rows, **means}
+
+
+def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth=None, progress=False):
+    """Every metric of the module docstring for `model` on `scene` (a `SceneData`).
+
+    `splits`: a subset of `SPLITS`; the freeze baseline comes with "extrapolation".
+    `ground_truth`: the synthetic scene's `AnalyticScene` for the motion metrics, or None.
+    Returns a JSON-ready dict: `max_time`, `splits` (per split, see `evaluate_split`),
+    `freeze_baseline` (or None), `motion` (`velocity`, `trajectory`, or None).
+    Raises ValueError naming `splits` for an unknown split.
+    """
+    unknown = [s for s in splits if s not in SPLITS]
+    if unknown or not splits:
+        raise ValueError(f"splits: expected a non-empty subset of {SPLITS}, got {list(splits)}")
+    result = {"max_time": float(scene.max_time), "splits": {}, "freeze_baseline": None, "motion": None}
+    for name in splits:
+        frames = getattr(scene, name)
+        result["splits"][name] = evaluate_split(model, frames, scene.background, lpips_weights, progress, name)
+    if "extrapolation" in splits:
+        result["freeze_baseline"] = freeze_baseline(model, scene.extrapolation, scene.background, scene.max_time,
+                                                    progress)
+    if ground_truth is not None:
+        result["motion"] = {"velocity": velocity_error(model, ground_truth, scene.max_time),
+                            "trajectory": trajectory_error(model, ground_truth, scene.max_time)}
+    return result
+
+
+def summary_markdown(result):
+    """The headline tables of `result` (from `evaluate_model`) as Markdown: mean image
+    metrics per split with the freeze baseline, then the motion errors when present."""
+    t = result["max_time"]
+    lines = ["| split | frames | PSNR ↑ | SSIM ↑ | LPIPS (alex) ↓ | LPIPS (vgg) ↓ |",
+             "|---|---:|---:|---:|---:|---:|"]
+    labels = {"interpolation": f"interpolation (t ≤ {t:g})", "extrapolation": f"extrapolation (t > {t:g})"}
+    for name, split in result["splits"].items():
+        lines.append(_metric_row(labels[name], split["count"], split["mean"]))
+    if result["freeze_baseline"] is not None:
+        base = result["freeze_baseline"]
+        lines.append(_metric_row(f"extrapolation, baseline: last observed frame frozen (t = {t:g})",
+                                 base["count"], base["mean"]))
+    motion = result["motion"]
+    if motion is not None:
+        vel, traj = motion["velocity"], motion["trajectory"]
+        lines += ["", f"| motion vs ground truth | observed (t ≤ {t:g}) | future (t > {t:g}) | all |",
+                  "|---|---:|---:|---:|"]
+        rows = [
+            (f"velocity relative L2 error ({vel['points']} surface points)", vel, "relative_l2", 3),
+            ("velocity mean error (units / unit time)", vel, "mean_abs", 4),
+            (f"trajectory mean distance ({traj['gaussians']} Gaussians, units)", traj, "mean_distance", 4),
+            ("trajectory mean distance if nothing moved (units)", traj, "static_mean_distance", 4),
+        ]
+        for label, block, key, digits in rows:
+            cells = [_fmt(block[g][key], digits) for g in ("observed", "future", "all")]
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def metrics_markdown(result, title="Metrics"):
+    """The whole `metrics.md`: headline tables (`summary_markdown`), how the numbers are
+    defined, and a per-frame table of each split."""
+    parts = [f"# {title}", ""]
+    for key in ("run", "data", "lpips"):
+        if result.get(key):
+            parts.append(f"- {key}: `{result[key]}`")
+    parts += ["", summary_markdown(result), "## Definitions", "", _DEFINITIONS.strip(), ""]
+    for name, split in result["splits"].items():
+        parts += [f"## Per frame: {name}", "", "| frame | t | PSNR | SSIM | LPIPS (alex) | LPIPS (vgg) |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for row in split["frames"]:
+            parts.append(f"| {row['path']} | {row['time']:.3f} | " + " | ".join(
+                _fmt(row.get(k), d) for k, d in zip(IMAGE_METRICS, (2, 4, 4, 4))) + " |")
+        parts.append("")
+    return "\n".join(parts)
+
+
+_DEFINITIONS = f"""
+PSNR (dB, capped at 100), SSIM (11×11 Gaussian window, σ = 1.5) and LPIPS v0.1 as in
+spec/losses_metrics.md, each the mean over the split's frames; predictions are clipped to
+[0, 1]. The baseline row renders every future frame's camera at the last observed time and
+holds it still: the difference to the extrapolation row is what the learned motion buys.
+Velocity: points sampled on the moving bodies' surfaces at t = 0 and carried along their
+true paths; at {len(MOTION_EVAL_TIMES)} evenly spaced times in [0, 1], ‖v_learned − v_true‖ / ‖v_true‖ over all points
+(a zero prediction scores 1), and the mean per-point error |v_learned − v_true|.
+Trajectory: Gaussians (opacity ≥ {ALPHA_MIN:.4g}) inside or within {EVAL_SURFACE_MARGIN:g} units of a moving body at
+t = 0; mean distance between their physics base positions at t and the true positions of
+the material points they started on. See velogauss/evaluate.py for the exact definitions.
+"""
+
+
+def _metric_row(label, count, mean):
+    cells = [_fmt(mean.get(k), d) for k, d in zip(IMAGE_METRICS, (2, 4, 4, 4))]
+    return f"| {label} | {count} | " + " | ".join(cells) + " |"
+
+
+def _fmt(value, digits):
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def _moving(scene, owner):
+    moving = np.array([not isinstance(body.motion, StaticMotion) for body in scene.bodies] + [False])
+    return moving[owner]  # owner −1 (no body) indexes the trailing False
+
+
+def _time_means(rows, max_time, keys):
+    groups = {"observed": [r for r in rows if r["time"] <= max_time],
+              "future": [r for r in rows if r["time"] > max_time], "all": rows}
+    out = {}
+    for group, members in groups.items():
+        out[group] = {}
+        for key in keys:
+            values = [r[key] for r in members if r[key] is not None]
+            out[group][key] = float(np.mean(values)) if values else None
+    return out
+
+
+def query(fn, t, points=None):
+    """`fn(points, t)`, or `fn(t)` when `points` is None, as a float64 NumPy array, without
+    gradients; `points (M, 3)` are passed in the dtype and on the device of the model that
+    owns the bound method `fn` (float32 on the CPU otherwise)."""
+    with torch.no_grad():
+        if points is None:
+            return to_numpy(fn(float(t))).astype(np.float64)
+        owner = getattr(fn, "__self__", None)
+        param = next(owner.parameters(), None) if isinstance(owner, torch.nn.Module) else None
+        x = torch.as_tensor(np.asarray(points), dtype=torch.float32 if param is None else param.dtype,
+                            device="cpu" if param is None else param.device)
+        return to_numpy(fn(x, float(t))).astype(np.float64)
+
+
+def _image_tensor(name, image):
+    tensor = torch.as_tensor(to_numpy(image), dtype=torch.float32)
+    if tensor.ndim != 3 or tensor.shape[2] != 3:
+        raise ValueError(f"{name}: expected an H×W×3 image, got shape {tuple(tensor.shape)}")
+    return tensor

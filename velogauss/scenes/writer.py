@@ -1,0 +1,152 @@
+"""Render a named synthetic scene to disk in the D-NeRF layout that `load_scene` reads.
+
+Written files (in `out_dir`):
+
+- `transforms_train.json`: the train views at every time in [0, 1] (the loader's
+  `max_time` cuts the future off); with `layout="monocular"` one train view per time,
+  cycling through the train views (as in D-NeRF).
+- `transforms_val.json`: the held-out views at every time.
+- `transforms_test.json`: every view at the times `t > future_after` (the future).
+- `train/`, `val/`, `test/`: RGBA PNGs, transparent where no body is hit (the static
+  ground of `multi` is opaque), anti-aliased with `supersample²` rays per pixel.
+- `points3d.ply`: points on the bodies' surfaces at t = 0 with their t = 0 colours.
+- `scene.json`: `name`, `effects`, `incompressible`, `bounds` (box of all bodies over
+  t in [0, 1]), `motion` (per body, `x(t) = A(t) x0 + b(t)` with its parameters), the
+  full `scene` description (`load_ground_truth` rebuilds it) and the `generator` settings.
+
+Cameras sit on a ring around the scene's `look_at` point at `camera_distance`, azimuths
+evenly spaced from a seeded random start, elevations cycling through 20°, 35°, 50°
+(± 3° seeded jitter); `n_heldout` of them, evenly spread, are held out.
+"""
+
+import json
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+
+from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
+from velogauss.data.ply import write_ply
+from velogauss.scenes.catalog import SCENES
+
+# Horizontal field of view of the D-NeRF synthetic scenes (radians): at 4 units it spans
+# about ±1.44 units, which frames objects of about one unit with room to move.
+DNERF_CAMERA_ANGLE_X = 0.6911112070083618
+_ELEVATIONS_DEG = (20.0, 35.0, 50.0)
+_ELEVATION_JITTER_DEG = 3.0
+_MOTION_MODEL = ("x(t) = A(t) x0 + b(t) for the material point at x0 at t = 0; "
+                 "v(x, t) = dA/dt A^-1 (x - b) + db/dt; "
+                 "rigid: A = exp(t [omega]x), b = c(t) - A centre, c(t) = centre + velocity t + gravity t^2 / 2; "
+                 "linear_flow: A = expm(t generator), b = centre - A centre; static: A = I, b = 0")
+
+
+def make_scene(name, out_dir, resolution=64, n_views=8, n_times=21, seed=0, *, n_heldout=2, supersample=2,
+               n_points=2000, layout="multiview", future_after=0.75, camera_distance=4.0,
+               camera_angle_x=DNERF_CAMERA_ANGLE_X):
+    """Render scene `name` (a key of `catalog.SCENES`) into `out_dir` and return its Path.
+
+    `resolution`: int (square) or `(width, height)` in pixels. `n_views` cameras, of which
+    `n_heldout` are held out (`1 ≤ n_heldout < n_views`). `n_times ≥ 2` times `k / (n_times − 1)`.
+    `seed` fixes the camera ring's azimuth offset and elevation jitter and the point-cloud
+    samples (the scene itself is deterministic). `supersample`: rays per pixel side.
+    `n_points`: size of `points3d.ply`. `layout`: "multiview" or "monocular".
+    `future_after`: times after it form `transforms_test.json`. Existing files are
+    overwritten. Defaults (64×64, 8 views, 21 times) render in a few seconds.
+    Raises ValueError naming the argument for a bad option.
+    """
+    if name not in SCENES:
+        raise ValueError(f"name: unknown scene {name!r}; choose one of {sorted(SCENES)}")
+    width, height = _resolution(resolution)
+    for arg, value, low in (("n_views", n_views, 2), ("n_times", n_times, 2), ("supersample", supersample, 1),
+                            ("n_points", n_points, 0), ("n_heldout", n_heldout, 1)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise ValueError(f"{arg}: expected an integer >= {low}, got {value!r}")
+    if n_heldout >= n_views:
+        raise ValueError(f"n_heldout: must be < n_views={n_views} so that train views remain, got {n_heldout}")
+    if layout not in ("multiview", "monocular"):
+        raise ValueError(f"layout: expected 'multiview' or 'monocular', got {layout!r}")
+    times = np.linspace(0.0, 1.0, n_times)
+    if not 0.0 <= future_after < 1.0 or not np.any(times > future_after):
+        raise ValueError(
+            f"future_after: expected a value in [0, 1) with at least one time after it, got {future_after!r}")
+    if not camera_distance > 0:
+        raise ValueError(f"camera_distance: expected > 0, got {camera_distance!r}")
+
+    scene = SCENES[name]()
+    rng = np.random.default_rng(seed)
+    cameras, ring = _camera_ring(scene.look_at, n_views, camera_distance, camera_angle_x, width, height, rng)
+    heldout = sorted({int(round((j + 0.5) * n_views / n_heldout)) % n_views for j in range(n_heldout)})
+    train_views = [k for k in range(n_views) if k not in heldout]
+    if layout == "monocular":
+        train_pairs = [(train_views[i % len(train_views)], i) for i in range(n_times)]
+    else:
+        train_pairs = [(k, i) for k in train_views for i in range(n_times)]
+    splits = {
+        "train": train_pairs,
+        "val": [(k, i) for k in heldout for i in range(n_times)],
+        "test": [(k, i) for k in range(n_views) for i in range(n_times) if times[i] > future_after],
+    }
+
+    out = Path(out_dir)
+    renders = {}
+    for split, pairs in splits.items():
+        (out / split).mkdir(parents=True, exist_ok=True)
+        frames = []
+        for view, i in pairs:
+            if (view, i) not in renders:
+                rgba = scene.render(cameras[view], float(times[i]), supersample)
+                renders[(view, i)] = np.round(np.clip(rgba, 0.0, 1.0) * 255.0).astype(np.uint8)
+            stem = f"r_{view:02d}_{i:03d}"
+            iio.imwrite(out / split / f"{stem}.png", renders[(view, i)])
+            frames.append({"file_path": f"./{split}/{stem}", "time": float(times[i]), "view": view,
+                           "transform_matrix": cameras[view].c2w_opengl.tolist()})
+        document = {"camera_angle_x": camera_angle_x, "frames": frames}
+        (out / f"transforms_{split}.json").write_text(json.dumps(document, indent=1))
+
+    points, colors, normals = scene.sample_surface(n_points, rng)
+    write_ply(out / "points3d.ply", points, colors, normals)
+    metadata = {
+        "format": "velogauss-scene/1",
+        "name": name,
+        "effects": scene.effects,
+        "incompressible": scene.incompressible,
+        "bounds": scene.bounds().tolist(),
+        "time_range": [0.0, 1.0],
+        "motion": {"model": _MOTION_MODEL,
+                   "bodies": [{"name": b.name, **b.motion.to_dict()} for b in scene.bodies]},
+        "scene": scene.to_dict(),
+        "generator": {"resolution": [width, height], "n_views": int(n_views), "n_heldout": int(n_heldout),
+                      "n_times": int(n_times), "seed": None if seed is None else int(seed),
+                      "supersample": int(supersample), "n_points": int(n_points), "layout": layout,
+                      "future_after": float(future_after), "camera_distance": float(camera_distance),
+                      "camera_angle_x": float(camera_angle_x), "train_views": train_views, "heldout_views": heldout,
+                      "azimuths_deg": ring[0], "elevations_deg": ring[1]},
+    }
+    (out / "scene.json").write_text(json.dumps(metadata, indent=1))
+    return out
+
+
+def _resolution(resolution):
+    if isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool):
+        resolution = (resolution, resolution)
+    try:
+        width, height = (int(v) for v in resolution)
+        ok = all(v == int(v) for v in resolution) and width >= 2 and height >= 2
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"resolution: expected an int >= 2 or (width, height), got {resolution!r}")
+    return width, height
+
+
+def _camera_ring(target, n_views, distance, camera_angle_x, width, height, rng):
+    K = intrinsics_from_fov(camera_angle_x, width, height)
+    start = rng.uniform(0.0, 360.0)
+    azimuths = [(start + 360.0 * k / n_views) % 360.0 for k in range(n_views)]
+    elevations = [_ELEVATIONS_DEG[k % len(_ELEVATIONS_DEG)] + rng.uniform(-_ELEVATION_JITTER_DEG, _ELEVATION_JITTER_DEG)
+                  for k in range(n_views)]
+    cameras = []
+    for az, el in zip(np.radians(azimuths), np.radians(elevations)):
+        eye = target + distance * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        cameras.append(Camera(look_at(eye, target), K, width, height))
+    return cameras, (azimuths, elevations)

@@ -1,0 +1,35 @@
+"""Acceleration field a(x, t) = Phi(x) alpha(t, E(gamma(x))), in torch.
+
+Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC).
+"""
+
+from velogauss_fast.checks import check_array
+from velogauss_fast.motion.code import _code
+from velogauss_fast.motion.coefficients import _masked, _mixing
+from velogauss_fast.motion.scalars import check_time
+from velogauss_fast.motion.velocity import _velocity
+
+
+def acceleration_field(params, x, t, cfg):
+    """a(x, t) = Phi(x) m(z) sum_d Q_d t^d with z = E(gamma(x)), masked like w (VG-ACC).
+
+    params: motion parameter dict (uses "code", "mix" and "acc" = Q (ACC_POLY_DEGREE + 1,
+    K, 12)); x: (N, 3) points; t: scalar time; cfg: MotionConfig -> a: (N, 3), world units
+    per unit time squared. All-zero Q (scenes without acceleration) gives a = 0.
+    """
+    check_array("x", x, (None, 3))
+    check_time("t", t)
+    return _acceleration(params, x, t, _mixing(params, _code(params, x, cfg)), cfg)
+
+
+def _acceleration(params, x, t, m, cfg):
+    """a at x for mixing weights m (N, K) already evaluated at x."""
+    return _velocity(x, _masked(m @ _acc_patterns(params["acc"], t), cfg))
+
+
+def _acc_patterns(Q, t):
+    """sum_d Q_d t^d (K, 12) by Horner's rule."""
+    out = Q[-1]
+    for Qd in Q.flip(0)[1:]:
+        out = out * t + Qd
+    return out
