@@ -2,6 +2,13 @@
 
 import os
 
+# Under pytest-xdist every worker would otherwise start one BLAS and one torch thread per
+# core: with `-n 2` on 2 cores that oversubscribes the machine and makes small NumPy/torch
+# calls up to 10x slower. One thread per worker; set before NumPy/torch load their pools.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, settings
@@ -18,6 +25,13 @@ settings.register_profile(
 # Local exploration: more and random examples.
 settings.register_profile("dev", max_examples=200, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+def pytest_configure(config):
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        import torch
+
+        torch.set_num_threads(1)
 
 
 def _devices():

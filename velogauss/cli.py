@@ -258,6 +258,21 @@ def bench_command(
     typer.echo(f"results: {out}")
 
 
+# --- walkthrough -----------------------------------------------------------------------
+
+@app.command("walkthrough")
+def walkthrough_command(
+    out: Path = typer.Option(..., "--out", "-o", help="Output folder (docs refreshes the committed copy)."),
+):
+    """Write the equation-by-equation walkthrough, OUT/walkthrough.md and OUT/figures/, by running the
+    NumPy reference (velogauss_ref.walkthrough)."""
+    from velogauss_ref.walkthrough import write_walkthrough
+
+    with user_errors():
+        page = write_walkthrough(out)
+    typer.echo(f"wrote {page}")
+
+
 # --- helpers shared by the commands ----------------------------------------------------
 
 def train_overrides(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
@@ -275,7 +290,9 @@ def train_overrides(effects=None, ablation=None, iterations=None, max_time=None,
         "data.background": None if background is None else list(parse_background(background)),
         "train.device": device,
     }
-    return [f"{key}={_toml_value(value)}" for key, value in pairs.items() if value is not None]
+    from velogauss.config import toml_value
+
+    return [f"{key}={toml_value(value)}" for key, value in pairs.items() if value is not None]
 
 
 def parse_background(text):
@@ -307,16 +324,6 @@ def _effects_list(text):
     return names
 
 
-def _toml_value(value):
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    return repr(value)
-
-
 def build_config(path, overrides):
     """The training config: defaults, then the TOML file `path` (if any), then `overrides`."""
     if path is not None:
@@ -327,12 +334,20 @@ def build_config(path, overrides):
 
 
 def with_data_dir(cfg, data_dir):
-    """`cfg` with the scene folder recorded, so `eval` and `render` find it again."""
-    raise NotImplementedError
+    """`cfg` with the scene folder recorded (absolute), so `eval` and `render` find it again."""
+    import dataclasses
+
+    return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, dir=str(Path(data_dir).resolve())))
 
 
 def _recorded_data_dir(run_dir):
-    raise NotImplementedError
+    """The scene folder a run was trained on, from `RUN_DIR/config.toml`."""
+    from velogauss.config import load_config
+
+    cfg = load_config(_existing_file(Path(run_dir) / "config.toml", "run config"))
+    if not cfg.data.dir:
+        raise ValueError(f"{Path(run_dir) / 'config.toml'}: data.dir: empty; pass the scene folder with --data")
+    return Path(cfg.data.dir)
 
 
 def load_run_model(run_dir, device=None):
@@ -356,7 +371,8 @@ def load_run_scene(cfg, data_dir):
     """The run's scene, loaded with the run's observed window, resolution and background."""
     from velogauss.data import load_scene
 
-    raise NotImplementedError
+    return load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
+                      background=cfg.data.background)
 
 
 def run_evaluation(run_dir, model, scene, splits, lpips_weights):

@@ -42,6 +42,7 @@ from velogauss.io_utils import to_numpy
 from velogauss.scenes.motions import StaticMotion
 from velogauss_fast import metrics
 from velogauss_ref.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN
+from velogauss_ref.lpips_nets import min_image_size
 
 IMAGE_METRICS = ("psnr", "ssim", "lpips_alex", "lpips_vgg")
 LPIPS_NETS = {"lpips_alex": "alex", "lpips_vgg": "vgg"}
@@ -57,7 +58,9 @@ def frame_metrics(pred, gt, lpips_weights=None, with_lpips=True):
     `pred`, `gt`: `H×W×3` arrays or tensors in [0, 1]; `pred` is clipped to [0, 1] first,
     as an 8-bit image of it would be. `lpips_weights`: folder of the LPIPS `.npz` weights
     or None (then `$VELOGAUSS_LPIPS_DIR`, `../shared/data/lpips`, the download). Returns a
-    dict of floats keyed by `IMAGE_METRICS` (LPIPS keys absent without LPIPS).
+    dict of floats keyed by `IMAGE_METRICS` (LPIPS keys absent without LPIPS, and for a
+    backbone whose layers do not fit the image: `min_image_size`, 31 px for alex, 16 px for
+    vgg, where the official lpips fails too).
     Raises ValueError naming `pred`/`gt` when the shapes differ.
     """
     pred_t, gt_t = _image_tensor("pred", pred), _image_tensor("gt", gt)
@@ -68,7 +71,8 @@ def frame_metrics(pred, gt, lpips_weights=None, with_lpips=True):
         row = {"psnr": float(metrics.psnr(pred_t, gt_t)), "ssim": float(metrics.ssim(pred_t, gt_t))}
         if with_lpips:
             for key, net in LPIPS_NETS.items():
-                row[key] = float(metrics.lpips(pred_t, gt_t, net=net, weights_dir=lpips_weights))
+                if min(pred_t.shape[:2]) >= min_image_size(net):
+                    row[key] = float(metrics.lpips(pred_t, gt_t, net=net, weights_dir=lpips_weights))
     return row
 
 

@@ -10,16 +10,19 @@ depth), and composites every pixel's run of the sorted table at once:
 
 * transmittance before pair i of a pixel: T_i = exp(sum_{j<i} log(1 - alpha_j)), a
   segmented prefix sum taken as (cumulative sum over the chunk) - (its value at the
-  pixel's first pair), accumulated in float64 whatever the working dtype. The absolute
-  error of log T is about 1e-16 times the running sum, whose size is at most
-  4.6 x `_CHUNK_PAIRS`: below 1e-9 (tests/fast/test_raster.py pins it against exact
-  per-pixel products on long runs);
+  pixel's first pair), accumulated in float64 whatever the working dtype. The running
+  sum restarts near 0 at every pixel (each pixel's total is taken away at its last
+  pair), so the absolute error of log T is ~1e-16 per pair times the pixel's own sum
+  of |log(1 - alpha)|, however long the chunk: below 1e-9 for any run that matters (up
+  to the stop that sum is below 14; tests/fast/test_raster.py pins it against exact
+  per-pixel products on long runs, in a full-size chunk and across chunk boundaries);
 * exact early termination (VG-BLEND): pair i is blended iff alpha_i > 0 and
   T_i (1 - alpha_i) >= TRANSMITTANCE_MIN; the prefix sum only decreases, so the first
   pair that fails ends its pixel and every later pair of the pixel fails too;
 * an analytic backward (`_Composite`, the 3DGS one) over the saved alpha and T of each
-  pair, chunk by chunk. `_composite_autograd` is the same formulation left to autograd;
-  tests compare the two, the benchmark times both.
+  pair, chunk by chunk, with the same restarting float64 sums within each pixel.
+  `_composite_autograd` is the same formulation left to autograd; tests compare the two,
+  the benchmark times both.
 """
 
 import math
@@ -27,6 +30,7 @@ from typing import NamedTuple
 
 import torch
 
+from velogauss_fast.backends import gsplat_available
 from velogauss_fast.checks import check_array
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
@@ -54,8 +58,7 @@ def splat_alpha(pixel, mean2d, conic, opacity):
     check_array("mean2d", mean2d, ("...", 2))
     check_array("conic", conic, ("...", 3))
     check_array("opacity", opacity)
-    alpha, _, _ = _alpha_from_offsets(pixel - mean2d, conic, opacity)
-    return alpha
+    return _alpha_from_offsets(pixel - mean2d, conic, opacity)
 
 
 def blend(colors, alphas, background):
@@ -70,7 +73,9 @@ def blend(colors, alphas, background):
     check_array("colors", colors, (None, 3))
     check_array("alphas", alphas, (colors.shape[0],))
     check_array("background", background, (3,))
-    t_incl = torch.cumprod(1 - alphas, dim=0)
+    # A skipped splat (alpha = 0) is no factor of the product at all, as in the reference's
+    # loop: 1 instead of 1 - alpha, which has the same value but a gradient.
+    t_incl = torch.cumprod(torch.where(alphas > 0, 1 - alphas, torch.ones_like(alphas)), dim=0)
     blended = (alphas > 0) & (t_incl >= TRANSMITTANCE_MIN)
     t_excl = torch.cat([torch.ones_like(t_incl[:1]), t_incl[:-1]])
     w = torch.where(blended, alphas * t_excl, torch.zeros_like(alphas))
@@ -100,8 +105,8 @@ def rasterize(
     `sh_degree` is given, viewmat (4, 4) world-to-camera (OpenCV), K (3, 3), width and
     height in pixels, background (3,) (default black); all tensors of one dtype and device.
     backend: "torch" (this module), "gsplat" (CUDA kernels, tile-based; see
-    velogauss_fast.backends.gsplat_backend) or "auto" (gsplat when CUDA and gsplat are
-    available, else torch).
+    velogauss_fast.backends.gsplat_backend; ValueError where CUDA or gsplat is missing) or
+    "auto" (gsplat when CUDA and gsplat are available, else torch).
     Returns image (H, W, 3), alpha (H, W, 1) = 1 - T, and meta: the VG-PROJ outputs
     (mean2d, depth, cov2d, conic, radius, valid), "colors" (N, 3) the RGB used, and
     "n_pairs" the number of (Gaussian, pixel) pairs composited. meta["mean2d"] is part of
@@ -138,9 +143,10 @@ def rasterize(
                              f"got {t.dtype} on {t.device}")
 
     if backend == "auto":
-        from velogauss_fast.backends import gsplat_available
-
         backend = "gsplat" if gsplat_available(means.device) else "torch"
+    elif backend == "gsplat" and not gsplat_available(means.device):
+        raise ValueError(f"backend: 'gsplat' needs CUDA tensors, a working CUDA device and the gsplat "
+                         f"package; got tensors on {means.device}")
     if backend == "gsplat":
         from velogauss_fast.backends.gsplat_backend import rasterize_gsplat
 
@@ -323,16 +329,30 @@ def _transmittance(alpha, counts):
     pixel; counts: (p,) pairs per pixel, summing to m. Returns (T, blended, logt): T (m,)
     the transmittance before each pair (working dtype), the VG-BLEND mask of the pairs
     actually blended and log(1 - alpha). log T is a float64 prefix sum of log(1 - alpha)
-    minus its value at the pixel's first pair.
+    within the pixel.
     """
     logt = torch.log1p(-alpha)  # exactly 0 for skipped pairs
-    cs = torch.cumsum(logt, 0, dtype=torch.float64)
-    first = torch.cumsum(counts, 0) - counts
-    base = torch.repeat_interleave((cs - logt).index_select(0, first[counts > 0]), counts[counts > 0],
-                                   output_size=len(alpha))
-    l_excl = cs - logt - base
+    l_excl, _, _ = _pixel_prefix(logt, counts[counts > 0])
     blended = (alpha > 0) & (l_excl + logt >= _LOG_TRANSMITTANCE_MIN)
     return torch.exp(l_excl).to(alpha.dtype), blended, logt
+
+
+def _pixel_prefix(x, cnt):
+    """Float64 sums of x (m,) within consecutive runs of cnt (p,) > 0 elements (pixels).
+
+    Returns (excl, total, owner): excl (m,) the sum of the run's earlier elements, total
+    (p,) each run's sum, owner (m,) the run of each element. One cumulative sum serves all
+    runs: each run's last element also takes away the run's total, so the running sum
+    restarts near 0 at every run and its rounding is that of one run's own sums, however
+    long the table (instead of 1e-16 times the whole chunk's sum).
+    """
+    first = torch.cumsum(cnt, 0) - cnt
+    owner = torch.repeat_interleave(torch.arange(len(cnt), device=x.device), cnt, output_size=len(x))
+    x = x.to(torch.float64)
+    total = torch.zeros(len(cnt), dtype=torch.float64, device=x.device).index_add_(0, owner, x)
+    y = x.index_add(0, first + cnt - 1, total, alpha=-1)
+    excl = torch.cumsum(y, 0) - y
+    return excl - excl.index_select(0, first).index_select(0, owner), total, owner
 
 
 def _gaussian_columns(mean2d, conic, opacity, rgb):
@@ -412,11 +432,10 @@ class _Composite(torch.autograd.Function):
             for k in range(3):
                 g_rgb[k].index_add_(0, gid, w * gi[k])
             # Loss-weighted colour of everything behind pair i in its pixel, plus the
-            # background/T_final term, from a float64 prefix sum within the pixel.
-            cq = torch.cumsum(w * cg, 0, dtype=torch.float64)
-            last = (torch.cumsum(cnt, 0) - 1)[live]
-            end = torch.repeat_interleave(cq.index_select(0, last), cnt[live], output_size=b - a)
-            behind = (end - cq).to(dtype) + torch.repeat_interleave(tail[p0:p1][live], cnt[live], output_size=b - a)
+            # background/T_final term, from float64 sums within the pixel.
+            wcg = w * cg
+            excl, total, owner = _pixel_prefix(wcg, cnt[live])
+            behind = (total.index_select(0, owner) - excl - wcg).to(dtype) + tail[p0:p1][live].index_select(0, owner)
             g_alpha = T * cg - behind / (1 - alpha)
             # d alpha / d sigma = -alpha unless skipped, terminated or clamped at ALPHA_MAX.
             g_sigma = torch.where((alpha > 0) & (alpha < ALPHA_MAX), g_alpha * -alpha, torch.zeros_like(alpha))

@@ -6,7 +6,9 @@
 - `gradcheck_fn`: torch.autograd.gradcheck of the fast function alone;
 - small random scenes and `boundary_band`, the pixels of a render that sit within a band
   of a threshold (ALPHA_MIN, TRANSMITTANCE_MIN, box edges, integer radii, culling,
-  depth ties), computed with the reference's own functions.
+  depth ties), computed with the reference's own functions; `projection_doubt`, the
+  Gaussians whose validity or integer radius sits within such a band;
+- `render_gradients`: gradients of a whole render, reference (autograd) or fast (torch).
 Agreement is scale-relative: max |fast - ref| <= rtol * max |ref| per output, since an
 elementwise relative error is meaningless at entries near zero. (tests/fast/motion/cases.py
 has the same three checks for parameter dicts; these take plain arrays only.)
@@ -15,11 +17,15 @@ has the same three checks for parameter dicts; these take plain arrays only.)
 import numpy as np
 import torch
 from autograd import make_vjp
+from autograd.builtins import tuple as ag_tuple
 from hypothesis import HealthCheck, settings
 
 from tests.ref.cameras import intrinsics, rigid_viewmat, to_world
+from velogauss_fast.raster import rasterize as fast_rasterize
 from velogauss_ref.constants import (
+    ALPHA_MAX,
     ALPHA_MIN,
+    EIGEN_DISCRIMINANT_FLOOR,
     FAR_PLANE,
     GAUSSIAN_EXTENT_SIGMA,
     NEAR_PLANE,
@@ -27,6 +33,7 @@ from velogauss_ref.constants import (
 )
 from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.projection import project_gaussians
+from velogauss_ref.raster import rasterize as ref_rasterize
 
 # float64: the same formulas up to reassociation (matrix products, sums of a few terms):
 # a few ulps of the largest intermediate, so 1e-9 leaves ~1e5 headroom and still catches
@@ -73,10 +80,11 @@ def _tuple(out):
     return out if isinstance(out, tuple) else (out,)
 
 
-def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, grad_rtol=RTOL64):
+def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, grad_rtol=RTOL64, floor=0.0):
     """Fast vs reference in float64: outputs, then gradients w.r.t. args[i], i in diff.
 
-    args: NumPy arrays (converted) or static values (passed as they are).
+    args: NumPy arrays (converted) or static values (passed as they are); floor: the
+    output scale below which values count as zero (see `assert_close`).
     """
     t_args = [to_torch(a, device=device, requires_grad=i in diff) if isinstance(a, np.ndarray) else a
               for i, a in enumerate(args)]
@@ -84,7 +92,7 @@ def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, gr
     assert len(out_f) == len(out_r)
     for k, (f, r) in enumerate(zip(out_f, out_r)):
         assert f.dtype == torch.float64 and f.device.type == torch.device(device).type
-        assert_close(f, r, rtol, name=f"output {k}")
+        assert_close(f, r, rtol, name=f"output {k}", floor=floor)
     if not diff:
         return
     rng = np.random.default_rng(seed)
@@ -94,7 +102,10 @@ def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, gr
         full = list(args)
         for i, a in zip(diff, selected):
             full[i] = a
-        return ref_fn(*full)
+        out = ref_fn(*full)
+        # A plain tuple of boxes is invisible to autograd (it would report zero
+        # gradients); its own tuple type is traced.
+        return ag_tuple(out) if isinstance(out, tuple) else out
 
     vjp, _ = make_vjp(ref_selected)(tuple(args[i] for i in diff))
     g_ref = vjp(cot if len(cot) > 1 else cot[0])
@@ -106,20 +117,21 @@ def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, gr
         assert_close(gf, np.asarray(gr), grad_rtol, name=f"gradient of argument {i}", floor=1.0)
 
 
-def check_float32(ref_fn, fast_fn, args, device, rtol=RTOL32):
-    """Fast in float32 vs the reference in float64 (outputs only)."""
+def check_float32(ref_fn, fast_fn, args, device, rtol=RTOL32, floor=0.0):
+    """Fast in float32 vs the reference in float64 (outputs only; floor as in check_agreement)."""
     t_args = [to_torch(a, torch.float32, device) if isinstance(a, np.ndarray) else a for a in args]
     out_f, out_r = _tuple(fast_fn(*t_args)), _tuple(ref_fn(*args))
     for k, (f, r) in enumerate(zip(out_f, out_r)):
         assert f.dtype == torch.float32
-        assert_close(f, r, rtol, name=f"float32 output {k}")
+        assert_close(f, r, rtol, name=f"float32 output {k}", floor=floor)
 
 
-def gradcheck_fn(fast_fn, args, diff, device):
+def gradcheck_fn(fast_fn, args, diff, device, fast_mode=False):
     """torch.autograd.gradcheck of fast_fn in float64 w.r.t. args[i], i in diff.
 
     Callers keep the inputs away from every threshold of fast_fn (clamps, culling,
-    skips): finite differences step 1e-6 across them.
+    skips): finite differences step 1e-6 across them. fast_mode checks <u, J v> for
+    random u, v instead of the whole Jacobian (for functions with many outputs).
     """
     t_args = [to_torch(a, device=device) if isinstance(a, np.ndarray) else a for a in args]
     leaves = [t_args[i].clone().requires_grad_() for i in diff]
@@ -130,7 +142,7 @@ def gradcheck_fn(fast_fn, args, diff, device):
             full[i] = x
         return fast_fn(*full)
 
-    assert torch.autograd.gradcheck(fn, tuple(leaves), eps=1e-6, atol=1e-6, rtol=1e-5)
+    assert torch.autograd.gradcheck(fn, tuple(leaves), eps=1e-6, atol=1e-6, rtol=1e-5, fast_mode=fast_mode)
 
 
 # --- scenes ----------------------------------------------------------------------------
@@ -173,38 +185,65 @@ def scene_to_torch(scene, dtype, device, requires_grad=False):
             for k, v in scene.items()}
 
 
-def boundary_band(scene, delta):
-    """Pixels (H, W) bool whose value may jump under a perturbation of relative size `delta`.
+def projection_doubt(proj, width, height, delta):
+    """Gaussians whose VG-PROJ outcome may flip under a relative perturbation `delta`.
 
-    Computed from the reference's projection and a per-pixel replay of VG-RENDER: a pixel
-    is in the band when, for some valid Gaussian (or one whose validity is in doubt),
-      - its centre is within delta * (1 + |u|) px of the box edge u +- r (or v +- r),
-      - 3 sqrt(lambda_max) is within delta of an integer (the radius may round the other
-        way): every pixel of the ring between the boxes of radius r - 1 and r + 1,
-      - o exp(-sigma) is within a relative delta of ALPHA_MIN, or |sigma| < delta,
-      - depth within a relative delta of NEAR_PLANE/FAR_PLANE or of another covering
-        Gaussian's depth (the order may swap),
-      - the on-screen test is within delta of flipping,
-    or when the transmittance after one of its pairs is within a relative 10 delta of
-    TRANSMITTANCE_MIN (T is a product of many factors, hence the wider band).
+    proj: the reference's `project_gaussians` output. Returns three (N,) bool arrays:
+    the depth test in doubt (depth within a relative delta of NEAR_PLANE or FAR_PLANE),
+    the on-screen test in doubt (within delta (1 + |u|) px of flipping) and the radius
+    in doubt (3 sqrt(lambda_max) within delta (1 + extent) of an integer).
     """
-    width, height = scene["width"], scene["height"]
-    Sigma = covariance_3d(scene["quats"], scene["scales"])
-    proj = project_gaussians(scene["means"], Sigma, scene["viewmat"], scene["K"], width, height)
     u, v = proj["mean2d"][:, 0], proj["mean2d"][:, 1]
     r = proj["radius"].astype(np.float64)
     cov = proj["cov2d"]
     det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
     b = 0.5 * (cov[:, 0, 0] + cov[:, 1, 1])
-    extent = GAUSSIAN_EXTENT_SIGMA * np.sqrt(b + np.sqrt(np.maximum(0.01, b * b - det)))
+    extent = GAUSSIAN_EXTENT_SIGMA * np.sqrt(b + np.sqrt(np.maximum(EIGEN_DISCRIMINANT_FLOOR, b * b - det)))
     depth = proj["depth"]
-    doubtful = (
-        (np.abs(depth - NEAR_PLANE) < delta * NEAR_PLANE) | (np.abs(depth - FAR_PLANE) < delta * FAR_PLANE)
-        | (np.abs(extent - np.round(extent)) < delta * (1 + extent))
-        | (np.abs(u + r) < delta * (1 + np.abs(u))) | (np.abs(u - r - width) < delta * (1 + np.abs(u)))
+    depth_doubt = (np.abs(depth - NEAR_PLANE) < delta * NEAR_PLANE) | (np.abs(depth - FAR_PLANE) < delta * FAR_PLANE)
+    screen_doubt = (
+        (np.abs(u + r) < delta * (1 + np.abs(u))) | (np.abs(u - r - width) < delta * (1 + np.abs(u)))
         | (np.abs(v + r) < delta * (1 + np.abs(v))) | (np.abs(v - r - height) < delta * (1 + np.abs(v)))
     )
-    considered = proj["valid"] | doubtful
+    radius_doubt = np.abs(extent - np.round(extent)) < delta * (1 + extent)
+    return depth_doubt, screen_doubt, radius_doubt
+
+
+def boundary_band(scene, delta):
+    """Pixels (H, W) bool whose value may jump under a perturbation of relative size `delta`.
+
+    Computed from the reference's projection and a per-pixel replay of VG-RENDER. A pair
+    (Gaussian, pixel) whose o exp(-sigma) is below (1 - delta) ALPHA_MIN is skipped
+    whatever else happens, so only the other ("visible") pairs can move a pixel. A pixel
+    is in the band when, for a Gaussian that is valid, or whose validity or radius is in
+    doubt (`projection_doubt`; with a radius one larger, its box would reach the image),
+      - its centre is within delta (1 + |u| + |v|) px of the box edge u +- r (or v +- r)
+        and the pair is visible,
+      - the radius is in doubt and the pixel is in the ring between the boxes of radius
+        r - 1 and r + 1, the pair visible,
+      - the on-screen test is in doubt and the pixel in its box widened by 1 px, the
+        pair visible,
+      - o exp(-sigma) is within a relative delta of ALPHA_MIN, or sigma within delta of
+        its own terms' size of 0 (its sign may flip), the pixel in the box,
+      - its depth is within a relative delta of the previous visible covering Gaussian's
+        (the order may swap),
+    or when the transmittance after one of its pairs is within a relative 10 delta of
+    TRANSMITTANCE_MIN (T is a product of many factors, hence the wider band). A Gaussian
+    whose depth test is in doubt puts the whole image in the band: the reference
+    projected it with a stand-in depth, so where it would land is unknown.
+    """
+    width, height = scene["width"], scene["height"]
+    Sigma = covariance_3d(scene["quats"], scene["scales"])
+    proj = project_gaussians(scene["means"], Sigma, scene["viewmat"], scene["K"], width, height)
+    depth_doubt, screen_doubt, radius_doubt = projection_doubt(proj, width, height, delta)
+    if depth_doubt.any():
+        return np.ones((height, width), bool)
+    u, v = proj["mean2d"][:, 0], proj["mean2d"][:, 1]
+    r = proj["radius"].astype(np.float64)
+    depth = proj["depth"]
+    depth_ok = (depth >= NEAR_PLANE) & (depth <= FAR_PLANE)
+    reach = (u + r + 1 >= 0) & (u - r - 1 <= width) & (v + r + 1 >= 0) & (v - r - 1 <= height)
+    considered = proj["valid"] | (depth_ok & (screen_doubt | (radius_doubt & reach)))
 
     jj, ii = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
     px, py = jj.reshape(-1, 1), ii.reshape(-1, 1)  # (P, 1)
@@ -212,26 +251,60 @@ def boundary_band(scene, delta):
     in_box = (np.abs(du) <= r) & (np.abs(dv) <= r)
     edge = np.minimum(np.abs(np.abs(du) - r), np.abs(np.abs(dv) - r))
     near_edge = edge < delta * (1 + np.abs(u) + np.abs(v))
-    ring = (np.abs(du) <= r + 1) & (np.abs(dv) <= r + 1) & ~((np.abs(du) <= r - 1) & (np.abs(dv) <= r - 1))
+    wide_box = (np.abs(du) <= r + 1) & (np.abs(dv) <= r + 1)
+    ring = wide_box & ~((np.abs(du) <= r - 1) & (np.abs(dv) <= r - 1))
     a, bb, c = proj["conic"].T
     sigma = 0.5 * (a * du * du + c * dv * dv) + bb * du * dv
+    sigma_terms = 0.5 * (np.abs(a) * du * du + np.abs(c) * dv * dv) + np.abs(bb * du * dv)
     raw = scene["opacities"] * np.exp(-np.maximum(sigma, 0))
-    near_alpha = (np.abs(raw - ALPHA_MIN) < delta * ALPHA_MIN) | (np.abs(sigma) < delta)
-    band = considered & ((in_box & near_alpha) | near_edge | (doubtful & ring))
+    visible = raw >= (1 - delta) * ALPHA_MIN
+    near_alpha = (np.abs(raw - ALPHA_MIN) < delta * ALPHA_MIN) | (np.abs(sigma) < delta * sigma_terms)
+    geometric = near_edge | (radius_doubt & ring) | (screen_doubt & wide_box)
+    band = considered & ((in_box & near_alpha) | (visible & geometric))
+    band = band.any(axis=1)  # (P,)
 
-    # Depth ties between Gaussians covering the same pixel, and the transmittance replay.
-    alpha = np.where((sigma >= 0) & (np.minimum(raw, 0.99) >= ALPHA_MIN), np.minimum(raw, 0.99), 0.0)
+    # Depth ties between visible Gaussians covering the same pixel, and the transmittance replay.
+    clamped = np.minimum(raw, ALPHA_MAX)
+    alpha = np.where((sigma >= 0) & (clamped >= ALPHA_MIN), clamped, 0.0)
     covering = in_box & proj["valid"]
     T, done = np.ones(len(px)), np.zeros(len(px), bool)
     prev_depth = np.full(len(px), -np.inf)
     for g in np.argsort(depth, kind="stable"):
         cov_g = covering[:, g]
-        band |= cov_g & (np.abs(depth[g] - prev_depth) < delta * np.abs(depth[g]))
-        prev_depth = np.where(cov_g, depth[g], prev_depth)
+        band |= cov_g & visible[:, g] & (np.abs(depth[g] - prev_depth) < delta * np.abs(depth[g]))
+        prev_depth = np.where(cov_g & visible[:, g], depth[g], prev_depth)
         active = cov_g & ~done & (alpha[:, g] > 0)
         t_next = T * (1 - alpha[:, g])
         band |= active & (np.abs(t_next - TRANSMITTANCE_MIN) < 10 * delta * TRANSMITTANCE_MIN)
         stop = active & (t_next < TRANSMITTANCE_MIN)
         done |= stop
         T = np.where(active & ~stop, t_next, T)
-    return band.any(axis=1).reshape(height, width)
+    return band.reshape(height, width)
+
+
+# --- whole renders ---------------------------------------------------------------------
+
+# The differentiable arguments of rasterize; scenes passed to `render_gradients` hold all six.
+RENDER_GRAD_KEYS = (*SCENE_KEYS, "background")
+
+
+def render_gradients(scene, cot_image, cot_alpha, device=None):
+    """Gradients of <image, cot_image> + <alpha, cot_alpha> w.r.t. RENDER_GRAD_KEYS of `scene`.
+
+    device None: the reference's autograd through its per-pixel loop; else the fast path's
+    torch autograd, float64 on `device`. Returns a dict of NumPy arrays.
+    """
+    static = {k: v for k, v in scene.items() if k not in RENDER_GRAD_KEYS}
+    if device is None:
+        def render(xs):
+            image, alpha, _ = ref_rasterize(**static, **dict(zip(RENDER_GRAD_KEYS, xs)))
+            return ag_tuple((image, alpha))
+
+        vjp, _ = make_vjp(render)(tuple(scene[k] for k in RENDER_GRAD_KEYS))
+        return dict(zip(RENDER_GRAD_KEYS, vjp((cot_image, cot_alpha))))
+    leaves = {k: to_torch(scene[k], device=device, requires_grad=True) for k in RENDER_GRAD_KEYS}
+    static = {k: to_torch(v, device=device) if isinstance(v, np.ndarray) else v for k, v in static.items()}
+    image, alpha, _ = fast_rasterize(**static, **leaves)
+    total = (image * to_torch(cot_image, device=device)).sum() + (alpha * to_torch(cot_alpha, device=device)).sum()
+    grads = torch.autograd.grad(total, list(leaves.values()), allow_unused=True)
+    return {k: np.zeros(np.shape(scene[k])) if g is None else to_numpy(g) for k, g in zip(RENDER_GRAD_KEYS, grads)}

@@ -12,30 +12,32 @@ Two measurements, float32, CPU unless --device says otherwise:
   forward + backward of the physics loss mean(|r|^2) + mean(div^2) to the parameters.
   Both are also evaluated once on the same inputs and their largest difference reported.
 
-Each measurement runs in a fresh subprocess: one warm-up pass, then the peak resident set
-size is reset (/proc/self/clear_refs) and `repeats` timed passes follow; memory is the
-high-water mark VmHWM above the resident size at the reset (on CUDA:
-torch.cuda.max_memory_allocated above the allocation at the reset).
-Parameters: `init_motion_params(default_rng(0), MotionConfig())` (the default sizes).
+Each measurement runs in a fresh subprocess: one warm-up pass, then freed heap memory is
+returned to the system (malloc_trim), the peak resident set size is reset
+(/proc/self/clear_refs) and `repeats` timed passes follow; memory is the high-water mark
+VmHWM above the resident size at the reset (on CUDA: torch.cuda.max_memory_allocated
+above the allocation at the reset).
+Parameters: `init_motion_params(default_rng(0), MotionConfig())` (the default sizes) plus
+N(0, 0.1^2) on every entry (`_params`): a fresh model does not move.
 
 Regenerate: python -m velogauss.bench.motion   (or: velogauss bench motion)
+Smoke test: python -m velogauss.bench.motion --quick --in-process --out /tmp/bench.md
 """
 
 import argparse
 import json
 import math
-import os
-import re
 import statistics
 import subprocess
 import sys
 import time
+from typing import NamedTuple
 
 import numpy as np
 import torch
 from torch.func import jacrev, vmap
 
-from velogauss.bench.raster import _machine, _status_kib
+from velogauss.bench.harness import machine, peak_above_mib, reset_peak_memory, write_section
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
@@ -48,11 +50,19 @@ SECTION = "## Motion and residuals"
 COMMAND = "python -m velogauss.bench.motion"
 CASES = ("trajectory-fwd", "trajectory-fwdbwd", "residuals-jvp-fwd", "residuals-jvp-fwdbwd",
          "residuals-jacrev-fwd", "residuals-jacrev-fwdbwd")
-N_PARTICLES = 100_000
-N_STEPS = 30
 T_END = 0.75
-N_POINTS = 65_536
 T_COLLOCATION = 0.4
+
+
+class Sizes(NamedTuple):
+    n_particles: int  # trajectory
+    n_steps: int  # RK2 steps over [0, T_END]
+    n_points: int  # residual collocation points
+
+
+FULL = Sizes(100_000, 30, 65_536)
+# Seconds for every case: for smoke tests, not for RESULTS.md.
+QUICK = Sizes(256, 2, 64)
 
 
 def reverse_mode_residuals(params, x, t, cfg):
@@ -74,9 +84,25 @@ def reverse_mode_residuals(params, x, t, cfg):
 
 
 def _params(dtype, device, requires_grad):
+    """The default MotionConfig's parameters (seed 0), every entry shifted by N(0, 0.1^2).
+
+    A fresh model starts still: the time network's last layer, Q and the ADF's last layer
+    are zero, so velocities, accelerations and residuals are identically 0 and the
+    forward-mode/jacrev comparison would be vacuous. The shift makes them all non-zero.
+    """
     cfg = MotionConfig()
-    params_np = init_motion_params(np.random.default_rng(0), cfg)
+    rng = np.random.default_rng(0)
+    params_np = _shifted(init_motion_params(rng, cfg), rng)
     return params_to_torch(params_np, dtype, device, requires_grad), cfg
+
+
+def _shifted(params, rng, scale=0.1):
+    """`params` (nested dicts, lists and tuples of arrays) plus N(0, scale^2) noise, same structure."""
+    if isinstance(params, dict):
+        return {k: _shifted(v, rng, scale) for k, v in params.items()}
+    if isinstance(params, (list, tuple)):
+        return type(params)(_shifted(v, rng, scale) for v in params)
+    return params + rng.normal(scale=scale, size=np.shape(params))
 
 
 def _leaves(params):
@@ -87,10 +113,10 @@ def _leaves(params):
     return [params]
 
 
-def _step_size():
-    """h with exactly N_STEPS steps of VG-INTEG over [0, T_END] (ceil(T_END / h) == N_STEPS)."""
-    h = T_END / N_STEPS * (1 + 1e-9)
-    assert math.ceil(T_END / h) == N_STEPS
+def _step_size(n_steps):
+    """h with exactly n_steps steps of VG-INTEG over [0, T_END] (ceil(T_END / h) == n_steps)."""
+    h = T_END / n_steps * (1 + 1e-9)
+    assert math.ceil(T_END / h) == n_steps
     return h
 
 
@@ -99,20 +125,20 @@ def _collocation_points(n, dtype, device, seed=1):
     return (2 * torch.rand(n, 3, generator=g, dtype=torch.float64) - 1).to(dtype=dtype, device=device)
 
 
-def _workload(case, device):
-    """The zero-argument function that one timed pass of `case` calls."""
+def _workload(case, device, sizes):
+    """The zero-argument function that one timed pass of `case` at `sizes` calls."""
     backward = case.endswith("fwdbwd")
     params, cfg = _params(torch.float32, device, requires_grad=backward)
     leaves = _leaves(params)
     g = torch.Generator().manual_seed(2)
     if case.startswith("trajectory"):
-        n = N_PARTICLES
+        n = sizes.n_particles
         x0 = (2 * torch.rand(n, 3, generator=g) - 1).to(device).requires_grad_(backward)
         q0 = torch.randn(n, 4, generator=g).to(device).requires_grad_(backward)
         s0 = (0.005 + 0.05 * torch.rand(n, 3, generator=g)).to(device).requires_grad_(backward)
         cot = [torch.randn(n, k, generator=g).to(device) for k in (3, 4, 3)]
         leaves += [x0, q0, s0]
-        h = _step_size()
+        h = _step_size(sizes.n_steps)
 
         def forward():
             z = physics_code(params, x0, cfg)
@@ -121,7 +147,7 @@ def _workload(case, device):
         def loss(out):
             return sum((o * c).sum() for o, c in zip(out, cot))
     else:
-        x = _collocation_points(N_POINTS, torch.float32, device)
+        x = _collocation_points(sizes.n_points, torch.float32, device)
         impl = physics_residuals if "-jvp-" in case else reverse_mode_residuals
 
         def forward():
@@ -145,34 +171,28 @@ def _workload(case, device):
     return step
 
 
-def _worker(case, repeats, device, threads):
+def _worker(case, repeats, device, threads, sizes):
     """Time `repeats` passes of one case in this (fresh) process."""
     if threads:
         torch.set_num_threads(threads)
-    step = _workload(case, device)
+    step = _workload(case, device, sizes)
     step()  # warm-up: allocator pools, lazy imports, one-time kernels
-    with open("/proc/self/clear_refs", "w") as f:
-        f.write("5")  # reset VmHWM to the current resident size
-    rss0 = _status_kib("VmRSS")
-    if device != "cpu":
-        torch.cuda.reset_peak_memory_stats()
-        cuda0 = torch.cuda.memory_allocated()
+    baseline = reset_peak_memory(device)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         step()
         times.append(time.perf_counter() - t0)
-    peak = (_status_kib("VmHWM") - rss0) / 1024
-    if device != "cpu":
-        peak = (torch.cuda.max_memory_allocated() - cuda0) / 2**20
-    return {"case": case, "times": times, "median_s": statistics.median(times), "peak_mib": peak,
-            "threads": torch.get_num_threads()}
+    return {"case": case, "times": times, "median_s": statistics.median(times),
+            "peak_mib": peak_above_mib(device, baseline), "threads": torch.get_num_threads()}
 
 
-def _measure(case, repeats, device, threads):
-    """Run one case in a fresh interpreter; returns its result dict."""
+def _measure(case, repeats, device, threads, quick=False, in_process=False):
+    """Run one case in a fresh interpreter (or in this one); returns its result dict."""
+    if in_process:
+        return _worker(case, repeats, device, threads, QUICK if quick else FULL)
     cmd = [sys.executable, "-m", "velogauss.bench.motion", "--worker", case, "--repeats", str(repeats),
-           "--device", device, "--threads", str(threads or 0)]
+           "--device", device, "--threads", str(threads or 0)] + (["--quick"] if quick else [])
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
@@ -180,7 +200,7 @@ def _measure(case, repeats, device, threads):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def residual_difference(device, dtype, n_points=N_POINTS):
+def residual_difference(device, dtype, n_points=FULL.n_points):
     """max |forward-mode - jacrev| over the transport residual and the divergence, and the
     largest |transport residual| (for scale), on the benchmark's collocation points."""
     params, cfg = _params(dtype, device, requires_grad=False)
@@ -189,22 +209,6 @@ def residual_difference(device, dtype, n_points=N_POINTS):
     r2, d2 = reverse_mode_residuals(params, x, T_COLLOCATION, cfg)
     diff = max(float((r1 - r2).abs().max()), float((d1 - d2).abs().max()))
     return diff, float(r1.abs().max()), float(d1.abs().max())
-
-
-def _write_section(out_path, text):
-    """Replace (or append) this module's section of out_path, leaving other sections alone."""
-    old = ""
-    if os.path.exists(out_path):
-        with open(out_path) as f:
-            old = f.read()
-    if not old.strip():
-        old = "# Benchmarks\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.M | re.S)
-    section = text.rstrip("\n") + "\n\n"
-    new = pattern.sub(lambda _: section, old, count=1) if pattern.search(old) else old.rstrip("\n") + "\n\n" + section
-    os.makedirs(os.path.dirname(out_path) or ".", exist_ok=True)
-    with open(out_path, "w") as f:
-        f.write(new.rstrip("\n") + "\n")
 
 
 def _fmt_row(label, r, base=None):
@@ -218,66 +222,78 @@ def _fmt_row(label, r, base=None):
             f"{len(r['times'])} runs, {r['threads']} threads |")
 
 
-def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo=print):
+def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo=print, quick=False,
+        in_process=False):
     """Run every case, write the "## Motion and residuals" section of `out`; return the results.
 
     repeats: timed passes per case (after one warm-up); threads: torch CPU threads in the
-    workers (None: torch's default).
+    workers (None: torch's default); quick: the QUICK sizes (smoke tests); in_process:
+    measure in this process instead of a fresh one per case (smoke tests; memory then
+    includes earlier cases' leftovers).
     """
     if repeats < 1:
         raise ValueError(f"repeats: expected a positive int, got {repeats!r}")
+    sizes = QUICK if quick else FULL
     results = {}
     for case in CASES:
-        results[case] = _measure(case, repeats, device, threads)
+        results[case] = _measure(case, repeats, device, threads, quick, in_process)
         echo(json.dumps({k: v for k, v in results[case].items() if k != "times"}))
-    diff32, r32, d32 = residual_difference(device, torch.float32)
-    diff64, _, _ = residual_difference(device, torch.float64)
+    diff32, r32, d32 = residual_difference(device, torch.float32, sizes.n_points)
+    diff64, _, _ = residual_difference(device, torch.float64, sizes.n_points)
     results["max_abs_difference"] = {"float32": diff32, "float64": diff64}
     echo(json.dumps(results["max_abs_difference"]))
     header = "| case | median (s) | time / forward-mode | peak memory above start (MiB) | memory / forward-mode | note |"
     rows = [header, "|---|---|---|---|---|---|"]
-    rows.append(_fmt_row(f"base_state RK2, {N_PARTICLES:,} particles x {N_STEPS} steps: forward",
-                         results["trajectory-fwd"]))
-    rows.append(_fmt_row(f"base_state RK2, {N_PARTICLES:,} particles x {N_STEPS} steps: forward + backward",
-                         results["trajectory-fwdbwd"]))
+    trajectory = f"base_state RK2, {sizes.n_particles:,} particles x {sizes.n_steps} steps"
+    rows.append(_fmt_row(f"{trajectory}: forward", results["trajectory-fwd"]))
+    rows.append(_fmt_row(f"{trajectory}: forward + backward", results["trajectory-fwdbwd"]))
     for kind, label in (("fwd", "forward"), ("fwdbwd", "forward + backward")):
         base = results[f"residuals-jvp-{kind}"]
-        rows.append(_fmt_row(f"residuals, {N_POINTS:,} points, forward-mode (ours): {label}", base, base))
-        rows.append(_fmt_row(f"residuals, {N_POINTS:,} points, jacrev per point (vmapped): {label}",
+        rows.append(_fmt_row(f"residuals, {sizes.n_points:,} points, forward-mode (ours): {label}", base, base))
+        rows.append(_fmt_row(f"residuals, {sizes.n_points:,} points, jacrev per point (vmapped): {label}",
                              results[f"residuals-jacrev-{kind}"], base))
+    command = " ".join([COMMAND] + (["--quick"] if quick else []) + ([f"--device {device}"] if device != "cpu" else [])
+                       + ([f"--threads {threads}"] if threads else []))
     text = "\n\n".join([
         SECTION,
         f"{device.upper()}, float32, `MotionConfig()` defaults, parameters "
-        f"`init_motion_params(default_rng(0), MotionConfig())`. Trajectory: `physics_code` + "
-        f"`base_state` (velocity + RK2, state (x, q, log s)) to t = {T_END} in {N_STEPS} steps; "
+        f"`init_motion_params(default_rng(0), MotionConfig())` shifted by N(0, 0.1^2) (so that "
+        f"velocities and residuals are not identically 0). Trajectory: `physics_code` + "
+        f"`base_state` (velocity + RK2, state (x, q, log s)) to t = {T_END} in {sizes.n_steps} steps; "
         f"backward = gradients of all motion parameters and x0, q0, s0 (random cotangent). "
-        f"Residuals: transport + divergence at {N_POINTS:,} points uniform in [-1, 1]^3, "
+        f"Residuals: transport + divergence at {sizes.n_points:,} points uniform in [-1, 1]^3, "
         f"t = {T_COLLOCATION}; backward = the loss mean(|r|^2) + mean(div^2) to the parameters. "
         f"Median of the timed runs after one warm-up, each case in a fresh process; memory is "
         f"the resident-set high-water mark during the timed runs above the resident size before "
-        f"them.",
+        f"them (freed heap memory trimmed first; on CUDA the allocator's peak).",
         f"Forward-mode vs jacrev, max abs difference over r and div: {diff32:.2e} in float32 "
         f"(max |r| = {r32:.2e}, max |div| = {d32:.2e}), {diff64:.2e} in float64.",
-        f"Machine: {_machine()}.",
-        f"Regenerate: `{COMMAND}`" + (f" `--threads {threads}`" if threads else ""),
+        f"Machine: {machine()}.",
+        f"Regenerate: `{command}`",
         "\n".join(rows),
     ])
-    _write_section(str(out), text)
+    write_section(str(out), SECTION, text)
     return results
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worker", metavar="CASE", choices=CASES, help=argparse.SUPPRESS)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=None, help="timed passes per case (default 5; 1 with --quick)")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"smoke test: {QUICK.n_particles} particles, {QUICK.n_steps} steps, "
+                             f"{QUICK.n_points} points")
+    parser.add_argument("--in-process", action="store_true",
+                        help="measure in this process, not one fresh process per case")
     parser.add_argument("--out", default="benchmarks/RESULTS.md")
     args = parser.parse_args(argv)
+    repeats = args.repeats or (1 if args.quick else 5)
     if args.worker:
-        print(json.dumps(_worker(args.worker, args.repeats, args.device, args.threads)))
+        print(json.dumps(_worker(args.worker, repeats, args.device, args.threads, QUICK if args.quick else FULL)))
         return
-    run(args.out, args.device, args.repeats, args.threads or None)
+    run(args.out, args.device, repeats, args.threads or None, quick=args.quick, in_process=args.in_process)
 
 
 if __name__ == "__main__":

@@ -11,20 +11,24 @@ Methods, all on the same random scenes (float32, CPU unless --device says otherw
 * reference -- velogauss_ref.raster.rasterize with autograd gradients (NumPy, per-pixel
                loop), on the smallest workload only.
 
-Each (method, workload) runs in a fresh subprocess: one warm-up pass, then the peak
-resident set size is reset (/proc/self/clear_refs) and `repeats` timed passes follow;
-memory is the high-water mark VmHWM minus the resident size at the reset (the scene, the
-interpreter and torch are excluded), and the absolute VmHWM is reported too.
+Each (method, workload) runs in a fresh subprocess: one warm-up pass, then the memory
+the allocator caches is returned to the system (malloc_trim), the peak resident set size
+is reset (/proc/self/clear_refs) and `repeats` timed passes follow; memory is the
+high-water mark VmHWM minus the resident size at the reset (the scene, the interpreter
+and torch are excluded), and the absolute VmHWM is reported too. On CUDA, memory is
+torch.cuda.max_memory_allocated above the allocation at the reset. "image sum" is the
+sum of the rendered image: equal across methods up to float32 rounding (the reference
+renders in float64), so a fast but wrong method shows. --threads sets torch's CPU threads
+in the workers: on a machine with busy cores, give no more than the idle ones (torch's
+spinning workers otherwise slow every pass down many times over).
 
 Regenerate: python -m velogauss.bench.raster   (or: velogauss bench raster)
+Smoke test: python -m velogauss.bench.raster --quick --in-process --out /tmp/bench.md
 """
 
 import argparse
 import json
 import math
-import os
-import platform
-import re
 import statistics
 import subprocess
 import sys
@@ -33,6 +37,7 @@ from dataclasses import dataclass
 
 import torch
 
+from velogauss.bench.harness import machine, peak_above_mib, reset_peak_memory, status_kib, write_section
 from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 SECTION = "## Rasterizer"
@@ -52,14 +57,19 @@ WORKLOADS = {
     "W2": Workload("W2", 128, 128, 10_000),
     "W3": Workload("W3", 256, 256, 50_000),
     "W4": Workload("W4", 400, 400, 100_000),
+    # Seconds for every method, the reference included: for smoke tests, not for RESULTS.md.
+    "quick": Workload("quick", 12, 12, 24),
 }
+DEFAULT_WORKLOADS = ("W1", "W2", "W3", "W4")
 METHODS = ("fast", "autograd", "dense", "reference")
 # The per-pixel NumPy reference is far too slow beyond the smallest workload.
-REFERENCE_WORKLOADS = ("W1",)
-# Bytes per (pixel, Gaussian) element the dense renderer keeps for backward (about 14
-# float32 tensors of shape (P, N) plus boolean masks, measured on W1): a dense run is
-# skipped when P * N times this exceeds the memory limit.
-DENSE_BYTES_PER_ELEMENT = 64
+REFERENCE_WORKLOADS = ("W1", "quick")
+# Peak bytes per (pixel, Gaussian) element of the dense renderer's forward + backward
+# (float32 tensors of shape (P, N) kept for backward plus the backward's own temporaries):
+# 993 MiB over W1's 4096 x 2000 elements, with freed heap memory trimmed before the
+# measurement (without, 562 MiB). A dense run is skipped when P * N times this exceeds
+# the memory limit.
+DENSE_BYTES_PER_ELEMENT = 128
 
 
 def make_scene(workload, seed=0, dtype=torch.float32, device="cpu"):
@@ -108,7 +118,9 @@ def dense_rasterize(means, quats, scales, opacities, colors, viewmat, K, width, 
     ids = ids[torch.argsort(proj["depth"][ids].detach(), stable=True)]
     mu, conic, r = proj["mean2d"][ids], proj["conic"][ids], proj["radius"][ids].to(means.dtype)
     jj, ii = torch.meshgrid(
-        torch.arange(width, dtype=means.dtype), torch.arange(height, dtype=means.dtype), indexing="xy"
+        torch.arange(width, dtype=means.dtype, device=means.device),
+        torch.arange(height, dtype=means.dtype, device=means.device),
+        indexing="xy",
     )
     centres = torch.stack([jj.reshape(-1), ii.reshape(-1)], dim=1) + 0.5  # [P, 2]
     du = centres[:, None, 0] - mu[None, :, 0]  # [P, N]
@@ -149,29 +161,32 @@ def _renderer(method):
 def _reference_renderer():
     """The NumPy reference (float64) wrapped so its autograd gradients land in the torch leaves."""
     from autograd import make_vjp
+    from autograd.builtins import tuple as traced_tuple
 
     from velogauss_ref.raster import rasterize as ref_rasterize
 
     names = ("means", "quats", "scales", "opacities", "colors")
 
+    def to_numpy(t):
+        return t.detach().double().cpu().numpy()
+
     class _Ref(torch.autograd.Function):
         @staticmethod
         def forward(ctx, width, height, viewmat, K, *leaves):
-            arrays = [t.detach().double().numpy() for t in leaves]
-            vm, k = viewmat.double().numpy(), K.double().numpy()
+            vm, k = to_numpy(viewmat), to_numpy(K)
 
-            def render(*xs):
+            def render(xs):
                 image, alpha, _ = ref_rasterize(*xs, vm, k, width, height)
-                return image, alpha
+                return traced_tuple((image, alpha))  # a plain tuple is invisible to autograd
 
-            ctx.vjp, (image, alpha) = make_vjp(lambda xs: render(*xs))(arrays)
-            ctx.dtype = leaves[0].dtype
-            return torch.from_numpy(image).to(ctx.dtype), torch.from_numpy(alpha).to(ctx.dtype)
+            ctx.vjp, (image, alpha) = make_vjp(render)([to_numpy(t) for t in leaves])
+            ctx.like = leaves[0]
+            return ctx.like.new_tensor(image), ctx.like.new_tensor(alpha)
 
         @staticmethod
         def backward(ctx, g_image, g_alpha):
-            grads = ctx.vjp((g_image.double().numpy(), g_alpha.double().numpy()))
-            return (None, None, None, None) + tuple(torch.from_numpy(g).to(ctx.dtype) for g in grads)
+            grads = ctx.vjp((to_numpy(g_image), to_numpy(g_alpha)))
+            return (None, None, None, None) + tuple(ctx.like.new_tensor(g) for g in grads)
 
     def run(**s):
         return _Ref.apply(s["width"], s["height"], s["viewmat"], s["K"], *(s[k] for k in names))
@@ -179,13 +194,16 @@ def _reference_renderer():
     return run
 
 
-def _status_kib(field):
-    with open("/proc/self/status") as f:
-        return int(re.search(rf"^{field}:\s+(\d+) kB", f.read(), re.M).group(1))
+def _worker(method, workload, repeats, device, threads=0):
+    """Time `repeats` forward+backward passes of one method in this (fresh) process.
 
-
-def _worker(method, workload, repeats, device):
-    """Time `repeats` forward+backward passes of one method in this (fresh) process."""
+    threads: torch CPU threads (0: torch's default, one per core). On a machine whose
+    cores are busy with other work, more threads than free cores make torch's OpenMP
+    workers spin against each other: passes ran 40x slower with 2 threads than with 1 on
+    a loaded 2-core machine.
+    """
+    if threads:
+        torch.set_num_threads(threads)
     scene = make_scene(WORKLOADS[workload], device=device)
     leaves = {k: scene[k].requires_grad_() for k in ("means", "quats", "scales", "opacities", "colors")}
     render = _renderer(method)
@@ -204,9 +222,7 @@ def _worker(method, workload, repeats, device):
 
     image = step()  # warm-up: allocator pools, lazy imports, one-time kernels
     checksum = float(image.detach().double().sum())
-    with open("/proc/self/clear_refs", "w") as f:
-        f.write("5")  # reset VmHWM to the current resident size
-    rss0 = _status_kib("VmRSS")
+    baseline = reset_peak_memory(device)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -217,9 +233,10 @@ def _worker(method, workload, repeats, device):
         "workload": workload,
         "times": times,
         "median_s": statistics.median(times),
-        "peak_rss_mib": _status_kib("VmHWM") / 1024,
-        "peak_above_start_mib": (_status_kib("VmHWM") - rss0) / 1024,
+        "peak_rss_mib": status_kib("VmHWM") / 1024,
+        "peak_above_start_mib": peak_above_mib(device, baseline),
         "checksum": checksum,
+        "threads": torch.get_num_threads(),
     }
 
 
@@ -234,10 +251,12 @@ def _skip_reason(method, workload, memory_limit_gib):
     return None
 
 
-def _measure(method, workload, repeats, device):
-    """Run one (method, workload) in a fresh interpreter; returns its result dict."""
+def _measure(method, workload, repeats, device, threads=0, in_process=False):
+    """Run one (method, workload) in a fresh interpreter (or in this one); returns its result dict."""
+    if in_process:
+        return _worker(method, workload, repeats, device, threads)
     cmd = [sys.executable, "-m", "velogauss.bench.raster", "--worker", method, workload,
-           "--repeats", str(repeats), "--device", device]
+           "--repeats", str(repeats), "--device", device, "--threads", str(threads)]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
@@ -245,22 +264,12 @@ def _measure(method, workload, repeats, device):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def _machine():
-    cpu = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = re.search(r"^model name\s*:\s*(.+)$", f.read(), re.M).group(1).strip()
-    except (OSError, AttributeError):
-        pass
-    return (f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} "
-            f"({torch.get_num_threads()} threads), Python {platform.python_version()}")
-
-
 def _table(results, workloads, methods):
     by = {(r["method"], r["workload"]): r for r in results}
     lines = [
-        "| workload | method | median fwd+bwd (s) | time / fast | peak RSS (MiB) | peak above start (MiB) | memory / fast | note |",
-        "|---|---|---|---|---|---|---|---|",
+        "| workload | method | median fwd+bwd (s) | time / fast | peak RSS (MiB) | peak above start (MiB) "
+        "| memory / fast | image sum | note |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for w in workloads:
         wl = WORKLOADS[w]
@@ -271,43 +280,44 @@ def _table(results, workloads, methods):
             if r is None:
                 continue
             if "skipped" in r:
-                lines.append(f"| {label} | {m} | - | - | - | - | - | {r['skipped']} |")
+                lines.append(f"| {label} | {m} | - | - | - | - | - | - | {r['skipped']} |")
                 continue
             ratio_t = ratio_m = "-"
             if fast is not None and "skipped" not in fast:
                 ratio_t = f"{r['median_s'] / fast['median_s']:.1f}x"
                 ratio_m = f"{r['peak_above_start_mib'] / max(fast['peak_above_start_mib'], 1e-9):.1f}x"
-            note = f"{len(r['times'])} runs"
+            note = f"{len(r['times'])} runs, {r['threads']} threads"
             lines.append(
                 f"| {label} | {m} | {r['median_s']:.3f} | {ratio_t} | {r['peak_rss_mib']:.0f} | "
-                f"{r['peak_above_start_mib']:.0f} | {ratio_m} | {note} |"
+                f"{r['peak_above_start_mib']:.0f} | {ratio_m} | {r['checksum']:.4f} | {note} |"
             )
     return "\n".join(lines)
 
 
-def _write_section(out_path, text):
-    """Replace (or append) the "## Rasterizer" section of out_path, leaving other sections alone."""
-    old = ""
-    if os.path.exists(out_path):
-        with open(out_path) as f:
-            old = f.read()
-    if not old.strip():
-        old = "# Benchmarks\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.M | re.S)
-    section = text.rstrip("\n") + "\n\n"
-    new = pattern.sub(lambda _: section, old, count=1) if pattern.search(old) else old.rstrip("\n") + "\n\n" + section
-    os.makedirs(os.path.dirname(out_path) or ".", exist_ok=True)
-    with open(out_path, "w") as f:
-        f.write(new.rstrip("\n") + "\n")
+def _command(workloads, methods, device, threads):
+    """The command line that regenerates a table of these workloads, methods, device and threads."""
+    parts = [COMMAND]
+    if tuple(workloads) != DEFAULT_WORKLOADS:
+        parts.append("--workloads " + " ".join(workloads))
+    if tuple(methods) != METHODS:
+        parts.append("--methods " + " ".join(methods))
+    if device != "cpu":
+        parts.append(f"--device {device}")
+    if threads:
+        parts.append(f"--threads {threads}")
+    return " ".join(parts)
 
 
-def run(out_path="benchmarks/RESULTS.md", workloads=tuple(WORKLOADS), methods=METHODS, repeats=None,
-        memory_limit_gib=24.0, device="cpu", echo=print):
+def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=METHODS, repeats=None,
+        memory_limit_gib=24.0, device="cpu", echo=print, threads=0, in_process=False):
     """Benchmark `methods` on `workloads` and write the "## Rasterizer" section of out_path.
 
     repeats: timed passes per measurement (default 5 on W1/W2, 3 on W3/W4, 1 for the
-    reference). memory_limit_gib: dense runs whose (P, N) tensors would need more are
-    skipped. Returns the list of result dicts.
+    reference and on "quick"). memory_limit_gib: dense runs whose (P, N) tensors would
+    need more are skipped. threads: torch CPU threads in the workers (0: torch's default).
+    in_process: measure in this process instead of a fresh one per measurement (smoke
+    tests; memory then includes earlier measurements' leftovers).
+    Returns the list of result dicts.
     """
     for w in workloads:
         if w not in WORKLOADS:
@@ -320,8 +330,8 @@ def run(out_path="benchmarks/RESULTS.md", workloads=tuple(WORKLOADS), methods=ME
         for m in methods:
             reason = _skip_reason(m, w, memory_limit_gib)
             if reason is None:
-                k = repeats or (1 if m == "reference" else 5 if w in ("W1", "W2") else 3)
-                r = _measure(m, w, k, device)
+                k = repeats or (1 if m == "reference" or w == "quick" else 5 if w in ("W1", "W2") else 3)
+                r = _measure(m, w, k, device, threads, in_process)
             else:
                 r = {"method": m, "workload": w, "skipped": reason}
             results.append(r)
@@ -332,31 +342,41 @@ def run(out_path="benchmarks/RESULTS.md", workloads=tuple(WORKLOADS), methods=ME
         f"opacities, colours) of one {device.upper()} float32 render; median of the timed runs after "
         f"one warm-up, each method and workload in a fresh process. Memory: the resident-set "
         f"high-water mark (VmHWM) during the timed runs, absolute and above the resident size "
-        f"before them (interpreter, torch and the scene excluded). Scenes: "
+        f"before them (interpreter, torch and the scene excluded; freed heap memory trimmed "
+        f"first; on CUDA the allocator's peak above its allocation before them). Scenes: "
         f"`velogauss.bench.raster.make_scene` (seed 0; screen-space standard deviations "
         f"0.2-2 px per axis, opacities 0.1-0.9).",
-        f"Machine: {_machine()}.",
-        f"Regenerate: `{COMMAND}`",
+        f"Machine: {machine()}.",
+        f"Regenerate: `{_command(workloads, methods, device, threads)}`",
         _table(results, workloads, methods),
     ])
-    _write_section(out_path, text)
+    write_section(out_path, SECTION, text)
     return results
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worker", nargs=2, metavar=("METHOD", "WORKLOAD"), help=argparse.SUPPRESS)
-    parser.add_argument("--workloads", nargs="+", default=list(WORKLOADS))
+    parser.add_argument("--workloads", nargs="+", default=list(DEFAULT_WORKLOADS),
+                        help=f"some of {', '.join(WORKLOADS)} (default: {' '.join(DEFAULT_WORKLOADS)})")
+    parser.add_argument("--quick", action="store_true",
+                        help="smoke test: the 12 x 12, 24-Gaussian workload, one timed pass")
+    parser.add_argument("--in-process", action="store_true",
+                        help="measure in this process, not one fresh process per measurement")
     parser.add_argument("--methods", nargs="+", default=list(METHODS))
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--memory-limit-gib", type=float, default=24.0)
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     parser.add_argument("--out", default="benchmarks/RESULTS.md")
     args = parser.parse_args(argv)
     if args.worker:
-        print(json.dumps(_worker(*args.worker, args.repeats or 3, args.device)))
+        print(json.dumps(_worker(*args.worker, args.repeats or 3, args.device, args.threads)))
         return
-    run(args.out, tuple(args.workloads), tuple(args.methods), args.repeats, args.memory_limit_gib, args.device)
+    workloads = ("quick",) if args.quick else tuple(args.workloads)
+    repeats = args.repeats or (1 if args.quick else None)
+    run(args.out, workloads, tuple(args.methods), repeats, args.memory_limit_gib, args.device,
+        threads=args.threads, in_process=args.in_process)
 
 
 if __name__ == "__main__":

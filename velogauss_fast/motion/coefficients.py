@@ -25,7 +25,7 @@ def coefficients(params, t, z, cfg):
 
 
 def _coefficients(params, t, z, cfg):
-    return _masked(_mixing(params, z) @ _patterns(params, t, cfg), cfg)
+    return _masked(_mixing(params, z) @ _patterns(params, t, cfg), cfg.mask)
 
 
 def _mixing(params, z):
@@ -34,14 +34,19 @@ def _mixing(params, z):
 
 
 def _patterns(params, t, cfg):
-    W0 = params["time"][0][0]
-    out = _mlp(params["time"], _encode(time_tensor(t, W0), cfg.n_freqs_t))  # [K * 12]
-    return out.reshape(-1, 12)  # [K, 12]
+    return _patterns_at(params, time_tensor(t, params["time"][0][0]), cfg)[0]  # [K, 12]
 
 
-def _masked(w, cfg):
-    """w with the columns outside cfg.mask set to exactly zero (identity when mask is None)."""
-    if cfg.mask is None:
+def _patterns_at(params, times, cfg):
+    """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them."""
+    out = _mlp(params["time"], _encode(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
+    return out.reshape(times.shape[0], -1, 12)
+
+
+def _masked(w, mask):
+    """w with the columns outside `mask` (cfg.mask or cfg.acc_mask) set to exactly zero
+    (identity when mask is None)."""
+    if mask is None:
         return w
-    mask = torch.as_tensor(np.asarray(cfg.mask, dtype=bool), device=w.device)
+    mask = torch.as_tensor(np.asarray(mask, dtype=bool), device=w.device)
     return w * mask.to(w.dtype)

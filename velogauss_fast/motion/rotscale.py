@@ -3,11 +3,9 @@
 Twin of `velogauss_ref.motion.rotscale` (spec/motion.md, VG-ROTSCALE).
 """
 
-import torch
-
 from velogauss_fast.checks import check_array
-from velogauss_fast.motion.basis import _affine
-from velogauss_fast.quaternion import quat_multiply, quat_to_rotmat
+from velogauss_fast.motion.generators import block_generator, strain_generator
+from velogauss_fast.motion.rates import GROUP_COLUMNS, axis_products, outer, rotmat, strain_rates
 
 
 def rotscale_rates(q, w):
@@ -24,12 +22,10 @@ def rotscale_rates(q, w):
 
 
 def _rotscale_rates(q, w):
-    omega = torch.cat([torch.zeros_like(w[..., :1]), w[..., 3:6]], dim=-1)  # pure quaternion
-    q_dot = 0.5 * quat_multiply(omega, q)
-    A, _ = _affine(w)
-    R = quat_to_rotmat(q)
-    # diag(R^T D R) = diag(R^T A R): the spin part of A adds r^T Omega r = 0 on each axis r.
-    # A R as three broadcast products: a batched 3x3 matmul is several times slower on CPU.
-    AR = sum(A[..., :, j, None] * R[..., None, j, :] for j in range(3))
-    log_s_dot = (AR * R).sum(-2)
-    return q_dot, log_s_dot
+    # base_state's per-stage kernels (velogauss_fast.motion.rates) on component-major views.
+    _, omega, w_strain = w.T.split([len(cols) for cols in GROUP_COLUMNS.values()])
+    T = block_generator(GROUP_COLUMNS["rotation"], ("q",), ("q",), q.dtype, q.device)
+    E = strain_generator(GROUP_COLUMNS["strain"], q.dtype, q.device)
+    q_dot = T @ outer(omega, q.T)
+    log_s_dot = strain_rates(w_strain, axis_products(rotmat(q.T)), E)
+    return q_dot.T, log_s_dot.T

@@ -31,3 +31,11 @@ def time_tensor(t, like):
     if isinstance(t, torch.Tensor):
         return t.to(dtype=like.dtype, device=like.device).reshape(1)
     return torch.full((1,), float(t), dtype=like.dtype, device=like.device)
+
+
+def times_tensor(times, like):
+    """A list of scalar times (numbers or 0-d tensors) as one (S,) tensor with the dtype and
+    device of `like`, keeping the autograd graph of tensor entries."""
+    if any(isinstance(t, torch.Tensor) for t in times):
+        return torch.cat([time_tensor(t, like) for t in times])
+    return torch.tensor([float(t) for t in times], dtype=like.dtype, device=like.device)

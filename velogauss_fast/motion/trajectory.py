@@ -6,11 +6,10 @@ Twin of `velogauss_ref.motion.trajectory` (spec/motion.md, VG-TRAJ).
 import torch
 
 from velogauss_fast.checks import check_array
-from velogauss_fast.motion.coefficients import _masked, _mixing, _patterns
-from velogauss_fast.motion.integrate import integrate
-from velogauss_fast.motion.rotscale import _rotscale_rates
-from velogauss_fast.motion.scalars import check_time
-from velogauss_fast.motion.velocity import _velocity
+from velogauss_fast.motion.coefficients import _mixing, _patterns_at
+from velogauss_fast.motion.integrate import integrate, stage_times
+from velogauss_fast.motion.rates import axis_products, rate_plan, rotmat, state_rates
+from velogauss_fast.motion.scalars import check_time, times_tensor
 from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
 
 
@@ -21,10 +20,14 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
     norm); s0: (N, 3) positive scales; z: (N, L) frozen physics codes; t: scalar target time
     (any real value; negative integrates backward); h > 0: maximum step; method: "euler" |
     "rk2" | "rk4"; cfg: MotionConfig -> x_t (N, 3), q_t (N, 4) unit, s_t (N, 3).
-    The three are integrated jointly as one (N, 10) state; the mixing weights m(z) are
-    computed once and the time network once per stage. t = 0 returns the canonical state
-    (q normalised). A quaternion that stays below QUAT_ZERO_NORM_SQ comes back as the
-    identity (1, 0, 0, 0). Raises ValueError for bad shapes, non-finite or non-positive s0.
+    Only what cfg.mask moves is integrated (`velogauss_fast.motion.rates`): without a
+    rotation column q_t is q0 normalised, without a stretch or shear column s_t is s0 itself
+    (both exactly what integrating their zero rates gives), and R(q0) is built once when log s
+    moves but q does not. The time network runs once on all stage times and the active
+    coefficients of every stage come from one (N, K) @ (K, stages x active) product; m(z) is
+    computed once. t = 0 returns the canonical state (q normalised). A quaternion that stays
+    below QUAT_ZERO_NORM_SQ comes back as the identity (1, 0, 0, 0). Raises ValueError for
+    bad shapes, non-finite or non-positive s0, a bad t, h or method.
     """
     check_array("x0", x0, (None, 3))
     n = x0.shape[0]
@@ -34,17 +37,38 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         raise ValueError("s0: expected positive scales")
     check_array("z", z, (n, params["mix"][0][0].shape[0]))
     check_time("t", t)
-    m = _mixing(params, z)  # [N, K], constant along the path: the code is frozen
+    taus = stage_times(0.0, t, h, method)
+    plan = rate_plan(cfg.mask, x0.dtype, x0.device)
+    lay = plan.layout
+    if not lay.columns:
+        return x0, normalize_quat(q0), s0  # w = 0: nothing moves, exactly as integrating 0
+    stage_w = iter(_stage_coefficients(params, z, taus, lay.columns, cfg))
+    # R(q0) is constant when q is: its axis products are built once, not once per stage.
+    RR0 = axis_products(rotmat(q0.T)) if lay.strain and not lay.rotation else None
 
     def rates(y, tau):
-        x, q = y[:, :3], y[:, 3:7]
-        w = _masked(m @ _patterns(params, tau, cfg), cfg)  # [N, 12]
-        q_dot, log_s_dot = _rotscale_rates(q, w)
-        return torch.cat([_velocity(x, w), q_dot, log_s_dot], dim=-1)
+        # integrate calls f at `taus`, in that order: the next stage's coefficients are tau's.
+        return state_rates(plan, next(stage_w), y, RR0)
 
-    y0 = torch.cat([x0, q0, torch.log(s0)], dim=-1)  # [N, 10]
-    y = integrate(rates, y0, 0.0, t, h, method)
-    return y[:, :3], normalize_quat(y[:, 3:7]), torch.exp(y[:, 7:])
+    parts = [x0.T] + [q0.T] * lay.rotation + [torch.log(s0).T] * lay.strain
+    y = integrate(rates, torch.cat(parts), 0.0, t, h, method)  # [rows, N], component-major
+    q = y[3:7].T if lay.rotation else q0
+    s = torch.exp(y[lay.width:].T) if lay.strain else s0
+    return y[:3].T, normalize_quat(q), s
+
+
+def _stage_coefficients(params, z, taus, columns, cfg):
+    """The active coefficients w(tau, z)[:, columns] at every stage time tau, as S tensors
+    (a, N) (component-major, see `velogauss_fast.motion.rates`).
+
+    Equal to `coefficients(...)` restricted to the mask's columns (the others are exactly 0):
+    P at all S times from one run of the time network, then one matrix product with m(z).
+    """
+    m = _mixing(params, z)  # [N, K], constant along the path: the code is frozen
+    P = _patterns_at(params, times_tensor(taus, params["time"][0][0]), cfg)  # [S, K, 12]
+    index = torch.tensor(columns, dtype=torch.long, device=m.device)
+    P = P.index_select(2, index).transpose(1, 2).reshape(len(taus) * len(columns), m.shape[1])  # [S a, K]
+    return (P @ m.T).split(len(columns))
 
 
 def normalize_quat(q):

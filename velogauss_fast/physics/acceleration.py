@@ -11,11 +11,13 @@ from velogauss_fast.motion.velocity import _velocity
 
 
 def acceleration_field(params, x, t, cfg):
-    """a(x, t) = Phi(x) m(z) sum_d Q_d t^d with z = E(gamma(x)), masked like w (VG-ACC).
+    """a(x, t) = Phi(x) m(z) sum_d Q_d t^d with z = E(gamma(x)), masked by cfg.acc_mask (VG-ACC).
 
     params: motion parameter dict (uses "code", "mix" and "acc" = Q (ACC_POLY_DEGREE + 1,
     K, 12)); x: (N, 3) points; t: scalar time; cfg: MotionConfig -> a: (N, 3), world units
     per unit time squared. All-zero Q (scenes without acceleration) gives a = 0.
+    The acceleration's own mask cfg.acc_mask, not the velocity's cfg.mask, applies: the
+    material derivative of a masked velocity field can need columns the velocity lacks.
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
@@ -24,7 +26,7 @@ def acceleration_field(params, x, t, cfg):
 
 def _acceleration(params, x, t, m, cfg):
     """a at x for mixing weights m (N, K) already evaluated at x."""
-    return _velocity(x, _masked(m @ _acc_patterns(params["acc"], t), cfg))
+    return _velocity(x, _masked(m @ _acc_patterns(params["acc"], t), cfg.acc_mask))
 
 
 def _acc_patterns(Q, t):

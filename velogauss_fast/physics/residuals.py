@@ -37,12 +37,12 @@ def transport_residual(params, x, t, cfg):
     P, dP_dt = _patterns_and_rate(params, t, cfg, x)
     m_of_x = _mixing_of_x(params, cfg)
     m = m_of_x(x)
-    w = _masked(m @ P, cfg)
+    w = _masked(m @ P, cfg.mask)
     v = _velocity(x, w)
     _, dm_v = jvp(m_of_x, (x,), (v,))  # d m / d x along v, [N, K]
     A, _ = _affine(w)
-    grad_v_v = (A * v[:, None, :]).sum(-1) + _velocity(x, _masked(dm_v @ P, cfg))
-    dv_dt = _velocity(x, _masked(m @ dP_dt, cfg))
+    grad_v_v = (A * v[:, None, :]).sum(-1) + _velocity(x, _masked(dm_v @ P, cfg.mask))
+    dv_dt = _velocity(x, _masked(m @ dP_dt, cfg.mask))
     return dv_dt + grad_v_v - _acceleration(params, x, t, m, cfg)
 
 
@@ -80,13 +80,13 @@ def _velocity_jet(params, x, t, cfg):
     # One JVP per coordinate axis, vmapped: the primal m is computed once, the three
     # tangents dm/dx_j (3, N, K) together.
     m, dm_dx = vmap(lambda e: jvp(m_of_x, (x,), (e,)), out_dims=(None, 0))(axes)
-    w = _masked(m @ P, cfg)
+    w = _masked(m @ P, cfg.mask)
     A, _ = _affine(w)
     # Column j of grad v: A(w) e_j + Phi(x) dw/dx_j.
-    dv_code = _velocity(x, _masked(dm_dx @ P, cfg))  # [3, N, 3], indexed [j, n, i]
+    dv_code = _velocity(x, _masked(dm_dx @ P, cfg.mask))  # [3, N, 3], indexed [j, n, i]
     grad_v = A + dv_code.permute(1, 2, 0)
     v = _velocity(x, w)
-    dv_dt = _velocity(x, _masked(m @ dP_dt, cfg))
+    dv_dt = _velocity(x, _masked(m @ dP_dt, cfg.mask))
     return v, dv_dt, grad_v, m
 
 

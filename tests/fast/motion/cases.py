@@ -1,7 +1,7 @@
 """Shared machinery of the motion and physics fast-path tests.
 
-Small configurations, parameters drawn by the reference's `init_motion_params`, and the
-three checks every fast function gets against its reference twin:
+Small configurations and parameters (from tests/ref/motion/cases.py), and the three checks
+every fast function gets against its reference twin:
 - `check_agreement`: float64 outputs, then float64 gradients of a random cotangent with
   respect to chosen arguments (parameter dicts included), fast (torch autograd) vs
   reference (`autograd`);
@@ -14,10 +14,14 @@ gradient leaf), because elementwise relative error is meaningless at entries nea
 import numpy as np
 import torch
 from autograd import make_vjp
+from autograd.builtins import tuple as ag_tuple
 from hypothesis import HealthCheck, settings
 
+# The NumPy-side helpers (configs, parameter dicts, masks) are shared with the reference's
+# tests; the fast tests import them from here with the torch-side checks.
+from tests.ref.motion.cases import (RIGID_MASK, TRANSLATION_MASK, column_mask,  # noqa: F401
+                                    constant_coefficient_params, map_leaves, random_params, small_cfg)
 from velogauss_fast.motion.params import params_to_torch
-from velogauss_ref.motion.config import MotionConfig, init_motion_params
 
 # float64 fast vs reference: both evaluate the same formulas in the same order up to a
 # few reassociations (a x + b as one sum, BLAS blocking of matrix products), i.e. a few
@@ -35,37 +39,6 @@ RTOL32 = 1e-4
 DEVICE_SETTINGS = settings(
     suppress_health_check=[*settings.default.suppress_health_check, HealthCheck.function_scoped_fixture]
 )
-
-# Small networks keep the reference's per-point autograd residuals fast while every branch
-# of the model runs (gamma of t with a frequency, code, mixing, ADF inputs).
-SMALL = dict(n_freqs_x=2, n_freqs_t=1, n_freqs_adf_x=2, n_freqs_adf_t=1, code_dim=3, n_patterns=4,
-             hidden=8, depth=2)
-# Column mask of a rigid scene: translation and rotation only.
-RIGID_MASK = np.array([True] * 6 + [False] * 6)
-
-
-def small_cfg(mask=None, **overrides):
-    return MotionConfig(**{**SMALL, **overrides}, mask=mask)
-
-
-def random_params(seed, cfg, scale=1.0):
-    """init_motion_params plus noise on every array, so that no layer is exactly zero.
-
-    Training zero-initialises some layers (the ADF's last layer); a test of every path
-    needs them non-zero. `scale` multiplies the noise (0.3 standard deviations).
-    """
-    rng = np.random.default_rng(seed)
-    params = init_motion_params(rng, cfg)
-    return map_leaves(lambda a: np.asarray(a, dtype=np.float64) + scale * 0.3 * rng.standard_normal(np.shape(a)),
-                      params)
-
-
-def map_leaves(fn, node):
-    if isinstance(node, dict):
-        return {k: map_leaves(fn, v) for k, v in node.items()}
-    if isinstance(node, (list, tuple)):
-        return type(node)(map_leaves(fn, v) for v in node)
-    return fn(node)
 
 
 def leaves(node):
@@ -137,7 +110,10 @@ def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, gr
         full = list(args)
         for i, a in zip(diff, selected):
             full[i] = a
-        return ref_fn(*full)
+        out = ref_fn(*full)
+        # A plain tuple of boxes is invisible to autograd (it would report zero
+        # gradients); its own tuple type is traced.
+        return ag_tuple(out) if isinstance(out, tuple) else out
 
     vjp, _ = make_vjp(ref_selected)(tuple(args[i] for i in diff))
     g_ref = leaves(vjp(cot if len(cot) > 1 else cot[0]))
@@ -160,8 +136,9 @@ def check_float32(ref_fn, fast_fn, args, device, rtol=RTOL32):
 
 def gradcheck_fn(fast_fn, args, diff, device):
     """torch.autograd.gradcheck of fast_fn in float64 w.r.t. args[i], i in diff (dicts flattened)."""
-    t_args = [to_torch(a, torch.float64, device) if isinstance(a, (np.ndarray, dict)) or i in diff else a
-              for i, a in enumerate(args)]
+    # A float argument in diff becomes a 0-d tensor (to_torch leaves numbers alone otherwise).
+    t_args = [to_torch(a, torch.float64, device, requires_grad=i in diff)
+              if isinstance(a, (np.ndarray, dict)) or i in diff else a for i, a in enumerate(args)]
     templates = {i: t_args[i] for i in diff}
     flat, spans = [], {}
     for i in diff:
@@ -179,20 +156,3 @@ def gradcheck_fn(fast_fn, args, diff, device):
     # fast_mode: one random projection of the Jacobian, not every column (cost independent of
     # the parameter count), compared between analytic and finite differences.
     assert torch.autograd.gradcheck(fn, tuple(flat), eps=1e-6, atol=1e-5, rtol=1e-4, fast_mode=True)
-
-
-def constant_coefficient_params(seed, cfg, w, acc=None):
-    """Parameters whose coefficients are w (12,) for every particle and time.
-
-    The time network's last layer is zeroed with bias tile(w, K), so all K patterns equal w
-    and any softmax mixture returns w. acc (ACC_POLY_DEGREE + 1, 12), if given, sets every
-    pattern's acceleration polynomial likewise. The code network stays random, so the
-    Eulerian field still routes through E(gamma(x)) -- with no effect on the value.
-    """
-    params = random_params(seed, cfg)
-    K = cfg.n_patterns
-    W, _ = params["time"][-1]
-    params["time"][-1] = (np.zeros_like(W), np.tile(np.asarray(w, dtype=np.float64), K))
-    if acc is not None:
-        params["acc"] = np.repeat(np.asarray(acc, dtype=np.float64)[:, None, :], K, axis=1)
-    return params

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.fast.motion.cases import DEVICE_SETTINGS, check_agreement, check_float32, gradcheck_fn
-from velogauss_fast.motion.integrate import integrate
+from velogauss_fast.motion.integrate import integrate, stage_times
 from velogauss_ref.motion import integrate as ref
 
 METHODS = ["euler", "rk2", "rk4"]
@@ -54,7 +54,7 @@ def test_convergence_order(method, order):
 
 @pytest.mark.spec("VG-INTEG")
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("t0, t1, h, n", [(0.0, 1.0, 0.3, 4), (1.0, -1.0, 0.5, 4), (0.0, 0.01, 1.0, 1), (2.0, 2.0, 0.1, 0)])
+@pytest.mark.parametrize("t0, t1, h, n", [(0.0, 1.0, 0.3, 4), (1.0, -1.0, 0.5, 4), (0.0, 0.01, 1.0, 1), (2.0, 2.0, 0.1, 1)])
 def test_step_count_and_landing(method, t0, t1, h, n):
     calls = []
 
@@ -67,12 +67,33 @@ def test_step_count_and_landing(method, t0, t1, h, n):
     # Every method integrates a constant rate exactly; the n steps land on t1.
     torch.testing.assert_close(y1, torch.full_like(y0, t1 - t0), rtol=0, atol=1e-15)
     stages = {"euler": 1, "rk2": 2, "rk4": 4}[method]
+    # t1 == t0 is one step of size 0 (n = max(1, ...)), which keeps d y1 / d t1 = f(y0, t0) exact.
     assert len(calls) == stages * n
-    if n:
-        # Steps of (t1 - t0) / n from t0; the last stage sits at offset 0, 1/2, 1 of the last step.
-        dt = (t1 - t0) / n
-        assert calls[0] == t0
-        assert calls[-1] == pytest.approx(t0 + (n - 1) * dt + {"euler": 0.0, "rk2": 0.5, "rk4": 1.0}[method] * dt)
+    # Steps of (t1 - t0) / n from t0; the last stage sits at offset 0, 1/2, 1 of the last step.
+    dt = (t1 - t0) / n
+    assert calls[0] == t0
+    assert calls[-1] == pytest.approx(t0 + (n - 1) * dt + {"euler": 0.0, "rk2": 0.5, "rk4": 1.0}[method] * dt)
+
+
+@pytest.mark.spec("VG-INTEG")
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("t0, t1, h", [(0.0, 0.5, 0.05), (0.0, -0.77, 0.1), (0.25, 0.25, 0.1), (-1.0, 2.5, 0.3)])
+@pytest.mark.parametrize("tensor_times", [False, True])
+def test_stage_times_are_the_times_f_sees(method, t0, t1, h, tensor_times):
+    # base_state evaluates the coefficients of every stage before integrating and hands
+    # them out in call order: stage_times must be exactly the times integrate passes to f.
+    if tensor_times:
+        t0, t1 = torch.tensor(t0, dtype=torch.float64), torch.tensor(t1, dtype=torch.float64, requires_grad=True)
+    calls = []
+
+    def record(y, t):
+        calls.append(t)
+        return y
+
+    integrate(record, torch.zeros(1, dtype=torch.float64), t0, t1, h, method)
+    times = stage_times(t0, t1, h, method)
+    assert len(times) == len(calls)
+    assert all(type(a) is type(b) and float(a) == float(b) for a, b in zip(times, calls))
 
 
 @pytest.mark.spec("VG-INTEG")
@@ -95,3 +116,7 @@ def test_rejects_bad_input():
         integrate(f, y0, float("nan"), 1.0, 0.1, "rk2")
     with pytest.raises(ValueError, match="^method"):
         integrate(f, y0, 0.0, 1.0, 0.1, "rk3")
+    with pytest.raises(ValueError, match="^h"):
+        stage_times(0.0, 1.0, 0.0, "rk2")
+    with pytest.raises(ValueError, match="^method"):
+        stage_times(0.0, 1.0, 0.1, "rk3")

@@ -14,9 +14,12 @@ def test_same_structure_and_values(device, dtype):
     out = params_to_torch(params, dtype, device, requires_grad=True)
     assert out.keys() == params.keys()
     for key in params:
-        assert type(out[key]) is type(params[key])
+        # Containers keep their type (list of (W, b) tuples); array leaves become tensors.
         if isinstance(params[key], list):
+            assert type(out[key]) is list
             assert all(type(a) is type(b) and len(a) == len(b) for a, b in zip(out[key], params[key]))
+        else:
+            assert isinstance(out[key], torch.Tensor)
     for t, a in zip(leaves(out), leaves(params)):
         assert t.dtype == dtype and t.device.type == torch.device(device).type
         assert t.is_leaf and t.requires_grad

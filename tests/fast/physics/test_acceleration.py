@@ -6,7 +6,7 @@ import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32,
+from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, TRANSLATION_MASK, check_agreement, check_float32,
                                      constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
 from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_ref.constants import ACC_POLY_DEGREE
@@ -16,9 +16,9 @@ from velogauss_ref.physics import acceleration as ref
 @pytest.mark.spec("VG-ACC")
 @DEVICE_SETTINGS
 @given(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.5, -2.0, 9.0]), masked=st.booleans(),
-       n=st.sampled_from([0, 1, 6]))
-def test_reference_vs_fast(device, seed, t, masked, n):
-    cfg = small_cfg(mask=RIGID_MASK if masked else None)
+       acc_masked=st.booleans(), n=st.sampled_from([0, 1, 6]))
+def test_reference_vs_fast(device, seed, t, masked, acc_masked, n):
+    cfg = small_cfg(mask=RIGID_MASK if masked else None, acc_mask=TRANSLATION_MASK if acc_masked else None)
     x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
     args = (random_params(seed, cfg), x, t, cfg)
     check_agreement(ref.acceleration_field, acceleration_field, args, diff=(0, 1, 2), device=device, seed=seed)
@@ -41,6 +41,34 @@ def test_polynomial_in_time(device):
     torch.testing.assert_close(acceleration_field(params, x, t, cfg), expected, rtol=0, atol=1e-13)
     zero = {**params, "acc": torch.zeros_like(params["acc"])}
     assert float(acceleration_field(zero, x, t, cfg).abs().max()) == 0.0
+
+
+@pytest.mark.spec("VG-ACC")
+def test_acc_mask_not_mask_applies(device):
+    # Every pattern's alpha is the same constant with all 12 columns set, so a = A(alpha) x +
+    # alpha[:3] unmasked. The velocity's mask must leave a alone; the acceleration's own
+    # mask must cut it to the translation columns.
+    alpha = np.linspace(0.1, 1.2, 12)
+    acc = np.zeros((3, 12))
+    acc[0] = alpha
+    x_np = np.random.default_rng(1).uniform(-1, 1, (5, 3))
+    x = torch.tensor(x_np, device=device)
+    A = np.array([[alpha[6], alpha[9] - alpha[5], alpha[4] + alpha[11]],
+                  [alpha[9] + alpha[5], alpha[7], alpha[10] - alpha[3]],
+                  [alpha[11] - alpha[4], alpha[10] + alpha[3], alpha[8]]])
+    full = x_np @ A.T + alpha[:3]
+    translation_only = np.broadcast_to(alpha[:3], (5, 3))
+
+    def a(**masks):
+        cfg = small_cfg(**masks)
+        params = to_torch(constant_coefficient_params(1, cfg, np.zeros(12), acc=acc), torch.float64, device)
+        return acceleration_field(params, x, 0.6, cfg).cpu().numpy()
+
+    # A handful of roundings of O(1) values.
+    np.testing.assert_allclose(a(mask=RIGID_MASK), full, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(a(mask=TRANSLATION_MASK), full, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(a(mask=RIGID_MASK, acc_mask=TRANSLATION_MASK), translation_only, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(a(acc_mask=TRANSLATION_MASK), translation_only, rtol=0, atol=1e-13)
 
 
 @pytest.mark.spec("VG-ACC")

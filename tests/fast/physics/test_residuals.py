@@ -80,6 +80,30 @@ def test_constant_coefficients_closed_form(device):
     torch.testing.assert_close(div, torch.full_like(div, w[6] + w[7] + w[8]), rtol=0, atol=1e-12)
 
 
+@pytest.mark.spec("VG-TRANSPORT", "VG-ACC")
+def test_spin_of_a_rigid_scene_needs_the_wider_acc_mask(device):
+    # v = omega x x under the rigid velocity mask; its material acceleration Omega^2 x is
+    # symmetric (stretch and shear columns), which only acc_mask (here None: all 12
+    # columns) lets a represent. Masking a by the velocity's mask would leave r = Omega^2 x.
+    omega = np.array([0.3, -0.8, 0.5])
+    w = np.zeros(12)
+    w[3:6] = omega
+    M = np.outer(omega, omega) - omega @ omega * np.eye(3)  # Omega^2
+    alpha = np.zeros(12)
+    alpha[6:9] = np.diag(M)
+    alpha[9:12] = [M[0, 1], M[1, 2], M[0, 2]]
+    acc = np.zeros((3, 12))
+    acc[0] = alpha
+    cfg = small_cfg(mask=RIGID_MASK)
+    params = to_torch(constant_coefficient_params(3, cfg, w, acc=acc), torch.float64, device)
+    x = torch.tensor(np.random.default_rng(3).uniform(-1, 1, (5, 3)), device=device)
+    # Roundings of O(1) values through a few products.
+    torch.testing.assert_close(transport_residual(params, x, 0.2, cfg), torch.zeros_like(x), rtol=0, atol=1e-13)
+    narrow = small_cfg(mask=RIGID_MASK, acc_mask=RIGID_MASK)
+    expected = x @ torch.tensor(M.T, device=device)
+    torch.testing.assert_close(transport_residual(params, x, 0.2, narrow), expected, rtol=0, atol=1e-13)
+
+
 @pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
 def test_tensor_time_is_differentiable(device):
     # d r / d t through a 0-d tensor time, against central differences of the residual.

@@ -1,0 +1,92 @@
+"""Smoke tests of velogauss/bench: each benchmark runs end to end on its --quick workload and
+writes a well-formed section of a results file. Timings are never asserted (the machine is
+shared); only the tables' structure and the benchmarks' own correctness checks are."""
+
+import json
+import re
+
+import pytest
+import torch
+
+from velogauss.bench import motion, raster
+
+
+@pytest.fixture
+def one_thread():
+    """The benchmarks' arguments for one torch thread (on a busy 2-core machine, two spin
+    against each other and a pass takes 20x longer); gives the test process its threads back."""
+    threads = torch.get_num_threads()
+    yield ["--threads", "1"]
+    torch.set_num_threads(threads)
+
+
+def section(text, title):
+    """The body of the `## title` section of a results file."""
+    match = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.M | re.S)
+    assert match, f"no '## {title}' section in:\n{text}"
+    return match.group(1)
+
+
+def table(body):
+    """(header cells, rows of cells) of the one markdown table in a section body."""
+    lines = [line for line in body.splitlines() if line.startswith("|")]
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines]
+    assert set(cells[1]) <= {"---"}, lines[1]
+    assert all(len(row) == len(cells[0]) for row in cells), lines
+    return cells[0], cells[2:]
+
+
+def test_raster_bench_quick(tmp_path, one_thread):
+    out = tmp_path / "RESULTS.md"
+    out.write_text("# Benchmarks\n\n## Rasterizer\n\nstale\n\n## Other\n\nkeep me\n")
+    raster.main(["--quick", "--in-process", "--out", str(out), *one_thread])
+    text = out.read_text()
+    assert text.count("## Rasterizer") == 1 and "stale" not in text
+    assert section(text, "Other").strip() == "keep me"
+    body = section(text, "Rasterizer")
+    assert "Regenerate: `python -m velogauss.bench.raster --workloads quick --threads 1`" in body
+    header, rows = table(body)
+    assert header == ["workload", "method", "median fwd+bwd (s)", "time / fast", "peak RSS (MiB)",
+                      "peak above start (MiB)", "memory / fast", "image sum", "note"]
+    assert [row[1] for row in rows] == list(raster.METHODS)
+    for row in rows:
+        assert row[0] == "quick 12x12, 24 G" and row[-1] == "1 runs, 1 threads", row
+        # Times print with 3 decimals: a sub-millisecond pass reads 0.000.
+        assert float(row[2]) >= 0 and float(row[4]) > 0 and row[3].endswith("x") and row[6].endswith("x")
+    # Every method renders the same image: float32 (fast, autograd, dense) against the
+    # float64 reference, 144 pixels of O(1) values: sums agree to ~1e-5 relative.
+    sums = [float(row[7]) for row in rows]
+    assert max(sums) - min(sums) <= 1e-4 * max(sums), sums
+
+
+def test_motion_bench_quick(tmp_path, one_thread):
+    out = tmp_path / "RESULTS.md"
+    motion.main(["--quick", "--in-process", "--out", str(out), *one_thread])
+    body = section(out.read_text(), "Motion and residuals")
+    assert "Regenerate: `python -m velogauss.bench.motion --quick --threads 1`" in body
+    header, rows = table(body)
+    assert header == ["case", "median (s)", "time / forward-mode", "peak memory above start (MiB)",
+                      "memory / forward-mode", "note"]
+    assert len(rows) == len(motion.CASES)
+    assert rows[0][0] == "base_state RK2, 256 particles x 2 steps: forward"
+    for row in rows:
+        assert float(row[1]) >= 0 and row[-1] == "1 runs, 1 threads", row
+    # The forward-mode and jacrev residuals agree, on residuals that are not all zero.
+    match = re.search(r"max abs difference over r and div: (\S+) in float32 \(max \|r\| = (\S+), "
+                      r"max \|div\| = (\S+)\), (\S+) in float64", body)
+    diff32, r_max, div_max, diff64 = (float(g.rstrip(",")) for g in match.groups())
+    assert r_max > 1e-3 and div_max > 1e-3
+    # Rounding of two summation orders: observed ~1e-15 (float64), ~1e-6 (float32) relative.
+    scale = max(r_max, div_max)
+    assert diff64 <= 1e-12 * scale and diff32 <= 1e-5 * scale
+
+
+@pytest.mark.parametrize("bench, argv, key", [
+    (raster, ["--worker", "dense", "quick", "--repeats", "1"], "peak_above_start_mib"),
+    (motion, ["--worker", "trajectory-fwdbwd", "--quick"], "peak_mib"),
+])
+def test_worker_prints_one_json_result(capsys, one_thread, bench, argv, key):
+    # What a fresh worker process prints for its parent (velogauss.bench.*._measure).
+    bench.main([*argv, *one_thread])
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert len(result["times"]) == 1 and result["median_s"] > 0 and key in result

@@ -1,0 +1,75 @@
+"""Tests of velogauss/model/profile.py: a scene's effects select what the motion model builds."""
+
+import numpy as np
+import pytest
+
+from velogauss.model.profile import resolve_profile
+from velogauss.scenes import SCENES
+from velogauss.scenes.motions import LinearFlowMotion, RigidMotion, StaticMotion
+
+T, R, S, H = range(0, 3), range(3, 6), range(6, 9), range(9, 12)
+
+
+def _cols(*groups):
+    return tuple(c in {i for g in groups for i in g} for c in range(12))
+
+
+@pytest.mark.parametrize("effects, mask, acc, acc_mask", [
+    (("translation",), _cols(T), False, _cols()),
+    (("translation", "gravity"), _cols(T), True, _cols(T)),
+    (("gravity",), _cols(T), True, _cols(T)),
+    (("rotation",), _cols(T, R), True, _cols(T, R, S, H)),
+    (("translation", "rotation", "gravity"), _cols(T, R), True, _cols(T, R, S, H)),
+    (("stretch",), _cols(T, S), True, _cols(T, R, S, H)),
+    (("shear",), _cols(T, H), True, _cols(T, R, S, H)),
+    (("translation", "rotation", "stretch", "shear"), _cols(T, R, S, H), True, _cols(T, R, S, H)),
+])
+def test_columns_and_acceleration(effects, mask, acc, acc_mask):
+    p = resolve_profile(effects, True)
+    assert p.moving and p.mask == mask and p.acceleration == acc and p.acc_mask == acc_mask
+    assert p.divergence
+
+
+def test_rigid_is_six_columns_affine_is_twelve():
+    assert resolve_profile(("translation", "rotation"), True).n_columns == 6
+    assert resolve_profile(("translation", "rotation", "stretch", "shear"), True).n_columns == 12
+
+
+def test_static_scene_builds_no_motion():
+    p = resolve_profile(("static",), True)
+    assert not p.moving and p.n_columns == 0 and not p.acceleration and not p.divergence
+
+
+def test_divergence_only_for_incompressible_motion():
+    assert not resolve_profile(("stretch",), False).divergence
+    assert resolve_profile(("stretch",), True).divergence
+
+
+def test_auto_reads_the_scene_then_falls_back_to_everything():
+    p = resolve_profile("auto", "auto", {"effects": ["rotation"], "incompressible": False})
+    assert p.effects == ("rotation",) and not p.divergence
+    q = resolve_profile("auto", "auto", None)
+    assert q.n_columns == 12 and q.divergence and q.acceleration
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_catalog_motion_lies_in_the_selected_columns(name, rng):
+    # The true velocity of every body must be representable with the profile's columns:
+    # fit the 12 coefficients of v(x) = A x + b by least squares on random points, then
+    # check the unselected columns are (numerically) unused.
+    from velogauss_ref.motion.basis import basis_matrix
+
+    scene = SCENES[name]()
+    p = resolve_profile(scene.effects, scene.incompressible)
+    for body in scene.bodies:
+        if isinstance(body.motion, StaticMotion):
+            continue
+        assert isinstance(body.motion, (RigidMotion, LinearFlowMotion))
+        for t in (0.0, 0.5, 0.9):
+            x = rng.uniform(-1, 1, (40, 3))
+            v = body.motion.velocity(x, t)
+            Phi = basis_matrix(x)[:, :, list(np.flatnonzero(p.mask))]  # (40, 3, k)
+            w, *_ = np.linalg.lstsq(Phi.reshape(-1, Phi.shape[-1]), v.reshape(-1), rcond=None)
+            residual = Phi.reshape(-1, Phi.shape[-1]) @ w - v.reshape(-1)
+            # Exactly representable: only float64 rounding of the least-squares solve remains.
+            assert np.abs(residual).max() < 1e-9 * max(1.0, np.abs(v).max()), (name, body.name, t)

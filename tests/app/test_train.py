@@ -1,0 +1,188 @@
+"""Tests of velogauss/train: curriculum, density control with optimiser surgery, static
+detection, atomic checkpoints, exact resume and Ctrl-C."""
+
+import json
+import signal
+
+import numpy as np
+import pytest
+import torch
+
+from velogauss.config import load_config
+from velogauss.data import load_scene
+from velogauss.model import build_model, scene_profile
+from velogauss.scenes import make_scene
+from velogauss.train import loop
+from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, load_model
+from velogauss.train.densify import DensityStats, densify_and_prune
+from velogauss.train.optim import make_optimizer
+from velogauss.train.sampling import FrameSampler
+from velogauss.train.static import detect_moving
+
+TINY = ["train.iterations=12", "train.warmup=3", "train.curriculum=4", "train.eval_every=6",
+        "train.checkpoint_every=4", "densify.start=2", "densify.every=4", "densify.until=10",
+        "densify.opacity_reset_every=8", "densify.static_every=4", "physics.n_points=64", "physics.ramp=2",
+        "model.hidden=16", "model.depth=1", "model.n_patterns=4", "model.code_dim=4"]
+
+
+@pytest.fixture(scope="module")
+def tiny_scene(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scene") / "toss"
+    make_scene("toss", path, resolution=24, n_views=4, n_times=6, n_points=300, n_heldout=1)
+    return load_scene(path)
+
+
+def test_curriculum_opens_the_time_window():
+    times = [0.0, 0.25, 0.5, 0.75] * 2
+    sampler = FrameSampler(times, warmup=10, curriculum=20, moving=True)
+    rng = np.random.default_rng(0)
+    assert {times[sampler.sample(it, rng)] for it in range(10) for _ in range(5)} == {0.0}
+    assert sampler.window(10) == pytest.approx(0.75 / 20)
+    assert sampler.window(29) == pytest.approx(0.75)
+    drawn = {times[sampler.sample(40, rng)] for _ in range(200)}
+    assert drawn == {0.0, 0.25, 0.5, 0.75}
+    static = FrameSampler(times, warmup=10, curriculum=20, moving=False)
+    assert static.window(0) == 0.75  # nothing moves: every frame from the start
+
+
+def _model(tiny_scene, overrides=()):
+    cfg = load_config(None, TINY + list(overrides))
+    profile = scene_profile(cfg, tiny_scene.metadata)
+    return cfg, build_model(cfg, profile, tiny_scene.points, tiny_scene.point_colors, np.random.default_rng(0))
+
+
+def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene):
+    cfg, model = _model(tiny_scene)
+    opt = make_optimizer(model, cfg.train, extent=4.0)
+    g = model.gaussians
+    n = len(g)
+    # One real step so that every Gaussian field has Adam moments.
+    (g.means.square().sum() + g.sh_dc.sum() + g.log_scales.sum() + g.quats.sum() + g.opacity_logits.sum()
+     + g.sh_rest.sum()).backward()
+    opt.step()
+    old_means = g.means.detach().clone()
+    old_moment = opt.state[g.means]["exp_avg"].clone()
+    stats = DensityStats(n)
+    stats.grad[:5] = 1.0  # five hot Gaussians
+    stats.count[:] = 1.0
+    with torch.no_grad():
+        g.opacity_logits[-3:] = -20.0  # three transparent ones, to be pruned
+        g.log_scales[:2] = np.log(10.0)  # two large ones among the hot: split, not cloned
+        g.log_scales[2:5] = np.log(0.01)  # three small ones: cloned (0.01 < percent_dense * 4)
+    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, after_reset=False,
+                            generator=torch.Generator().manual_seed(0))
+    assert out == {"cloned": 3, "split": 2, "pruned": 3, "total": n - 3 - 2 + 3 + 4}
+    assert len(g) == len(model.moving) == out["total"]
+    # The kept rows keep their values and moments, in order; new rows start with zero moments.
+    kept = n - 5
+    assert torch.equal(g.means[: kept - 0][:3], old_means[2:5])
+    moment = opt.state[g.means]["exp_avg"]
+    assert torch.equal(moment[:3], old_moment[2:5])
+    assert torch.all(moment[kept:] == 0)
+    assert opt.param_groups[0]["params"][0] is g.means
+    # Split children are drawn around their parent with scales / 1.6.
+    children = g.log_scales[-4:].exp()
+    assert torch.allclose(children, torch.full_like(children, 10.0 / 1.6))
+
+
+def test_densify_respects_the_gaussian_budget(tiny_scene):
+    cfg, model = _model(tiny_scene, [f"densify.max_gaussians={300 + 4}"])
+    opt = make_optimizer(model, cfg.train, extent=4.0)
+    n = len(model.gaussians)
+    stats = DensityStats(n)
+    stats.grad[:] = torch.linspace(1.0, 2.0, n)  # every Gaussian hot, the last ones hottest
+    stats.count[:] = 1.0
+    with torch.no_grad():
+        model.gaussians.log_scales.fill_(np.log(0.01))  # all small: candidates for cloning
+    hottest = model.gaussians.means[-4:].detach().clone()
+    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, after_reset=False,
+                            generator=torch.Generator().manual_seed(0))
+    assert out["total"] == n + 4 and out["cloned"] == 4
+    assert torch.equal(model.gaussians.means[-4:], hottest)
+
+
+def test_static_detection(tiny_scene):
+    cfg, model = _model(tiny_scene)
+    # A fresh model is still (zero velocity and ADF heads): everything is static.
+    assert not detect_moving(model, 0.75, 1e-4).any()
+    # Translation w1 = 1 everywhere: every particle moves 0.75 by t = 0.75.
+    with torch.no_grad():
+        model.motion.time[-1].copy_(torch.tensor([1.0] + [0.0] * 11).repeat(cfg.model.n_patterns))
+    assert detect_moving(model, 0.75, 1e-4).all()
+    assert model.moving.all()  # detection leaves the flags alone
+
+
+def test_static_particles_are_rendered_canonical(tiny_scene):
+    cfg, model = _model(tiny_scene)
+    with torch.no_grad():
+        model.motion.time[-1].copy_(torch.tensor([1.0] + [0.0] * 11).repeat(cfg.model.n_patterns))
+    moving = torch.zeros(len(model.gaussians), dtype=torch.bool)
+    moving[::2] = True
+    model.set_moving(moving)
+    x0 = model.gaussians.means.detach()
+    means = model.state_at(0.5)[0].detach()
+    assert torch.equal(means[~moving], x0[~moving])
+    assert torch.allclose(means[moving] - x0[moving], torch.tensor([0.5, 0.0, 0.0]).expand(int(moving.sum()), 3),
+                          atol=1e-5)
+
+
+def test_checkpoint_write_is_atomic(tiny_scene, tmp_path, monkeypatch):
+    cfg = load_config(None, TINY + ["train.iterations=4"])
+    loop.train(cfg, tiny_scene, tmp_path, progress=False)
+    before = checkpoint_path(tmp_path).read_bytes()
+
+    def broken_save(obj, path):
+        with open(path, "wb") as handle:
+            handle.write(b"half a checkpo")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(torch, "save", broken_save)
+    with pytest.raises(OSError, match="disk full"):
+        loop.train(load_config(None, TINY + ["train.iterations=8"]), tiny_scene, tmp_path, resume=True,
+                   progress=False)
+    assert checkpoint_path(tmp_path).read_bytes() == before
+    assert [p.name for p in checkpoint_path(tmp_path).parent.iterdir()] == ["latest.pt"]
+
+
+def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, monkeypatch):
+    cfg = load_config(None, TINY)
+    full = loop.train(cfg, tiny_scene, tmp_path / "full", progress=False)
+    step = loop._Loop.step
+
+    def step_then_interrupt(self, it):
+        out = step(self, it)
+        if it == 5:  # between checkpoints (every 4) and evaluations (every 6)
+            signal.raise_signal(signal.SIGINT)
+        return out
+
+    monkeypatch.setattr(loop._Loop, "step", step_then_interrupt)
+    with pytest.raises(KeyboardInterrupt, match="iteration 6"):
+        loop.train(cfg, tiny_scene, tmp_path / "cut", progress=False)
+    assert load_checkpoint(tmp_path / "cut")["iteration"] == 6
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    monkeypatch.setattr(loop._Loop, "step", step)
+    resumed = loop.train(cfg, tiny_scene, tmp_path / "cut", resume=True, progress=False)
+    # Same draws, same densification, same numbers: bit for bit on the CPU.
+    a, b = full.state_dict(), resumed.state_dict()
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+    log = [json.loads(line) for line in (tmp_path / "cut" / "log.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in log] == [6, 12]
+    model, saved_cfg = load_model(tmp_path / "cut")
+    assert saved_cfg == cfg and load_checkpoint(tmp_path / "cut")["iteration"] == 12
+
+
+@pytest.mark.parametrize("ablation", ["no-pds", "no-adf", "no-gpc", "deform-only"])
+def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
+    cfg = load_config(None, TINY + [f"model.ablation={ablation}", "train.iterations=8"])
+    model = loop.train(cfg, tiny_scene, tmp_path, progress=False)
+    reloaded, _ = load_model(tmp_path)
+    frame = tiny_scene.extrapolation[0]
+    with torch.no_grad():
+        a = model.render(frame.camera, frame.time, tiny_scene.background)[0]
+        b = reloaded.render(frame.camera, frame.time, tiny_scene.background)[0]
+    assert torch.isfinite(a).all() and torch.equal(a, b)
+    has_velocity = ablation != "deform-only"
+    assert reloaded.has_velocity == has_velocity
+    assert (reloaded.motion.use_adf) == (ablation != "no-adf")

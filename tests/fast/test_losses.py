@@ -1,0 +1,99 @@
+"""velogauss_fast.losses: VG-LOSS and VG-LOSS-PHYS against velogauss_ref.losses."""
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from tests.fast.render_cases import DEVICE_SETTINGS, check_agreement, check_float32, gradcheck_fn
+from tests.fast.test_metrics import summed
+from tests.ref.test_losses import offset_pair
+from velogauss_fast.losses import photometric_loss, physics_loss
+from velogauss_ref import losses as ref
+
+seeds = st.integers(0, 2**32 - 1)
+sizes = st.integers(11, 24)
+weights = st.floats(0.01, 2.0)
+
+
+@pytest.mark.spec("VG-LOSS")
+@DEVICE_SETTINGS
+@given(seed=seeds, height=sizes, width=sizes)
+def test_photometric_loss_reference_vs_fast(device, seed, height, width):
+    pred, gt = offset_pair(seed, height, width)
+    # float64: observed 8e-15 relative (SSIM's window sums in another order); RTOL64 1e-9.
+    check_agreement(summed(ref.photometric_loss), summed(photometric_loss), (pred, gt), diff=(0, 1),
+                    device=device, seed=seed)
+    # float32: observed 1e-5 relative over 300 random pairs (small losses); RTOL32 1e-4.
+    check_float32(ref.photometric_loss, photometric_loss, (pred, gt), device)
+
+
+@pytest.mark.spec("VG-LOSS")
+def test_photometric_loss_gradcheck(device):
+    # |pred - gt| >= 1e-2 >> gradcheck's eps. The smallest image and pred only, as in
+    # tests/fast/test_metrics.py::test_ssim_gradcheck; gt's gradient is compared with the reference.
+    pred, gt = offset_pair(5, 11, 11, margin=1e-2)
+    gradcheck_fn(photometric_loss, (pred, gt), diff=(0,), device=device)
+
+
+@pytest.mark.spec("VG-LOSS")
+def test_photometric_loss_of_identical_images_is_zero_with_zero_gradient(device):
+    gt = torch.rand(16, 12, 3, dtype=torch.float64, device=device)
+    pred = gt.clone().requires_grad_()
+    loss = photometric_loss(pred, gt)
+    loss.backward()
+    # SSIM(x, x) = 1 up to the rounding of E[x^2] - mu^2 over C2; |x| has gradient 0 at 0.
+    assert float(loss.detach()) == pytest.approx(0.0, abs=1e-12)
+    assert float(pred.grad.abs().max()) <= 1e-12
+
+
+@pytest.mark.spec("VG-LOSS-PHYS")
+@DEVICE_SETTINGS
+@given(seed=seeds, n=st.integers(0, 9), lambda_transport=weights, lambda_div=weights, with_div=st.booleans())
+def test_physics_loss_reference_vs_fast(device, seed, n, lambda_transport, lambda_div, with_div):
+    rng = np.random.default_rng(seed)
+    r, div = rng.standard_normal((n, 3)), (rng.standard_normal(n) if with_div else None)
+    args = (r, div, lambda_transport, lambda_div)
+    # Sums of at most 27 squares: a few ulps; RTOL64 1e-9, RTOL32 1e-4.
+    check_agreement(ref.physics_loss, physics_loss, args, diff=(0, 1) if with_div else (0,), device=device,
+                    seed=seed)
+    check_float32(ref.physics_loss, physics_loss, args, device)
+
+
+@pytest.mark.spec("VG-LOSS-PHYS")
+def test_physics_loss_gradcheck(device):
+    rng = np.random.default_rng(6)
+    gradcheck_fn(lambda r, div: physics_loss(r, div, 0.3, 0.7), (rng.standard_normal((5, 3)), rng.standard_normal(5)),
+                 diff=(0, 1), device=device)
+
+
+@pytest.mark.parametrize(
+    "args, name",
+    [
+        ((torch.zeros(4, 4), torch.zeros(4, 4, 3)), "pred"),
+        ((torch.zeros(12, 12, 3), torch.zeros(12, 13, 3)), "gt"),
+        ((torch.zeros(10, 12, 3), torch.zeros(10, 12, 3)), "pred"),
+        ((torch.zeros(12, 12, 3), torch.full((12, 12, 3), float("nan"))), "gt"),
+    ],
+)
+def test_photometric_bad_input_names_the_argument(args, name):
+    with pytest.raises(ValueError, match=f"^{name}:"):
+        photometric_loss(*args)
+
+
+@pytest.mark.parametrize(
+    "r, div, lt, ld, name",
+    [
+        (torch.zeros(3, 2), None, 0.1, 0.1, "r"),
+        (np.zeros((3, 3)), None, 0.1, 0.1, "r"),
+        (torch.tensor([[0.0, float("inf"), 0.0]]), None, 0.1, 0.1, "r"),
+        (torch.zeros(3, 3), torch.zeros(2), 0.1, 0.1, "div"),
+        (torch.zeros(3, 3), torch.tensor([0.0, float("nan"), 0.0]), 0.1, 0.1, "div"),
+        (torch.zeros(3, 3), None, -0.1, 0.1, "lambda_transport"),
+        (torch.zeros(3, 3), None, 0.1, float("inf"), "lambda_div"),
+    ],
+)
+def test_physics_bad_input_names_the_argument(r, div, lt, ld, name):
+    with pytest.raises(ValueError, match=f"^{name}:"):
+        physics_loss(r, div, lt, ld)

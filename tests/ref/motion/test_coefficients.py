@@ -1,0 +1,114 @@
+"""velogauss_ref.motion.coefficients: VG-COEF, w = m(z) P(t) from K motion patterns, masked."""
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from tests.ref.gradcheck import check_grads_fd
+from tests.ref.motion.cases import FD_STEP, RIGID_MASK, TRANSLATION_MASK, flat_params, random_params, small_cfg
+from velogauss_ref.motion import coefficients as coef_module
+from velogauss_ref.motion.coefficients import coefficients, mixing_weights
+from velogauss_ref.nn import mlp, positional_encoding
+
+seeds = st.integers(0, 2**32 - 1)
+times = st.sampled_from([0.0, 0.37, 1.0, -2.5, 6.0])
+codes = hnp.arrays(np.float64, (6, 3), elements=st.floats(-3, 3))
+
+
+def _patterns(params, t, cfg):
+    """P(t) (K, 12) through the public VG-ENC and VG-MLP, which have their own tests."""
+    return mlp(params["time"], positional_encoding(np.array([t]), cfg.n_freqs_t)).reshape(cfg.n_patterns, 12)
+
+
+@pytest.mark.spec("VG-COEF")
+@given(seeds, times, codes)
+def test_mixture_of_patterns(seed, t, z):
+    cfg = small_cfg()
+    params = random_params(seed, cfg)
+    A, c = params["mix"][0]
+    u = z @ A + c
+    m = np.exp(u) / np.exp(u).sum(axis=1, keepdims=True)  # |u| < 20: the textbook softmax is exact here
+    np.testing.assert_allclose(coefficients(params, t, z, cfg), m @ _patterns(params, t, cfg), rtol=0,
+                               atol=1e-12 * (1 + np.abs(_patterns(params, t, cfg)).max()))
+
+
+@pytest.mark.spec("VG-COEF")
+def test_time_network_runs_once_per_time(monkeypatch):
+    cfg = small_cfg(n_freqs_t=2)
+    params = random_params(1, cfg)
+    calls = []
+
+    def counting_mlp(layers, x):
+        calls.append((layers is params["time"], np.shape(x)))
+        return mlp(layers, x)
+
+    monkeypatch.setattr(coef_module, "mlp", counting_mlp)
+    w = coefficients(params, 0.4, np.random.default_rng(1).standard_normal((50, cfg.code_dim)), cfg)
+    # One evaluation, on gamma(t) alone (5 values), for all 50 particles.
+    assert calls == [(True, (1 + 2 * cfg.n_freqs_t,))]
+    assert w.shape == (50, 12)
+
+
+@pytest.mark.spec("VG-COEF")
+@given(seeds, hnp.arrays(np.float64, (8, 3), elements=st.floats(-1e3, 1e3)))
+def test_mixing_weights_are_a_distribution(seed, z):
+    # Codes up to 1e3 make z A + c reach ~1e3, where exp overflows: the weights must not.
+    cfg = small_cfg()
+    m = mixing_weights(random_params(seed, cfg), z)
+    assert m.shape == (8, cfg.n_patterns)
+    assert np.all(m >= 0)
+    np.testing.assert_allclose(m.sum(axis=1), 1.0, rtol=0, atol=1e-14)
+
+
+@pytest.mark.spec("VG-COEF")
+@given(seeds, times, codes)
+def test_every_row_lies_in_the_patterns_hull(seed, t, z):
+    cfg = small_cfg()
+    params = random_params(seed, cfg)
+    w, P = coefficients(params, t, z, cfg), _patterns(params, t, cfg)
+    slack = 1e-12 * (1 + np.abs(P).max())
+    assert np.all(w >= P.min(axis=0) - slack) and np.all(w <= P.max(axis=0) + slack)
+    # With z-independent mixing (A = 0) all particles share one w.
+    same = {**params, "mix": [(np.zeros_like(params["mix"][0][0]), params["mix"][0][1])]}
+    w_same = coefficients(same, t, z, cfg)
+    np.testing.assert_allclose(w_same, np.broadcast_to(w_same[0], w_same.shape), rtol=0, atol=1e-14)
+
+
+@pytest.mark.spec("VG-COEF")
+@pytest.mark.parametrize("mask", [RIGID_MASK, TRANSLATION_MASK])
+def test_mask_zeroes_exactly_the_unselected_columns(mask):
+    z = np.random.default_rng(2).standard_normal((7, 3)) * 3
+    params = random_params(2, small_cfg())
+    w_masked = coefficients(params, 0.8, z, small_cfg(mask=mask))
+    w = coefficients(params, 0.8, z, small_cfg())
+    assert np.all(w_masked[:, ~mask] == 0.0)
+    np.testing.assert_array_equal(w_masked[:, mask], w[:, mask])
+    assert np.all(w[:, ~mask] != 0.0)  # the mask, not the parameters, zeroes them
+
+
+@pytest.mark.spec("VG-COEF")
+@pytest.mark.parametrize("masked", [False, True])
+@given(seed=seeds, t=st.floats(-3, 3), z=hnp.arrays(np.float64, (3, 3), elements=st.floats(-2, 2)),
+       n_freqs_t=st.integers(0, 2))
+def test_coefficients_gradient(masked, seed, t, z, n_freqs_t):
+    cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t)
+    theta, unflatten = flat_params(random_params(seed, cfg))
+    check_grads_fd(lambda theta, t, z: coefficients(unflatten(theta), t, z, cfg), (theta, t, z), (0, 1, 2),
+                   np.random.default_rng(seed), step=FD_STEP)
+
+
+@pytest.mark.parametrize(
+    "t, z, name",
+    [
+        (np.nan, np.zeros((3, 3)), "t"),
+        (np.zeros(2), np.zeros((3, 3)), "t"),
+        (0.5, np.zeros((3, 4)), "z"),
+        (0.5, np.full((3, 3), np.inf), "z"),
+    ],
+)
+def test_bad_input_names_the_argument(t, z, name):
+    cfg = small_cfg()
+    with pytest.raises(ValueError, match=f"^{name}:"):
+        coefficients(random_params(0, cfg), t, z, cfg)

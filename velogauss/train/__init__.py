@@ -1,0 +1,1 @@
+"""Training: the loop, density control, optimiser schedules, checkpoints."""

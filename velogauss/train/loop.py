@@ -1,0 +1,227 @@
+"""The training loop: one view per iteration, photometric + physics losses, density control.
+
+Per iteration (velogauss.config holds every number):
+1. draw a training frame by the time curriculum (velogauss.train.sampling);
+2. move the Gaussians to its time (VG-TRAJ + VG-ADF) and render it (VG-RENDER);
+3. loss = photometric (VG-LOSS) + ramped physics loss (VG-LOSS-PHYS) on collocation
+   points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual);
+4. Adam step with the scheduled learning rates; density statistics; every
+   `densify.every` iterations clone/split/prune, opacity resets, static-particle detection.
+A progress bar shows loss, PSNR and the Gaussian count; every `eval_every` iterations the
+PSNR on the interpolation split goes to `RUN_DIR/log.jsonl`; checkpoints are atomic and
+resuming from one continues exactly where it stopped (same draws, same numbers). Ctrl-C
+finishes the current iteration, writes a checkpoint and stops.
+"""
+
+import contextlib
+import json
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from velogauss.config import to_toml
+from velogauss.io_utils import write_text
+from velogauss.model import ABLATION_SWITCHES, build_model, model_from_state, scene_profile
+from velogauss.model.build import profile_from_dict
+from velogauss.model.dynamic import render_gaussians
+from velogauss.train.checkpoint import load_checkpoint, save_checkpoint
+from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
+from velogauss.train.optim import make_optimizer, set_learning_rates
+from velogauss.train.sampling import FrameSampler, camera_extent, collocation_points
+from velogauss.train.static import detect_moving
+from velogauss_fast.losses import photometric_loss, physics_loss
+from velogauss_fast.metrics import psnr
+from velogauss_ref.constants import STATIC_DISPLACEMENT_MAX
+
+# Frames of the interpolation split scored at each evaluation (evenly spread): enough for
+# a stable mean, few enough that an evaluation costs a fraction of a second.
+_EVAL_FRAMES = 8
+# Smoothing of the PSNR shown in the progress bar (exponential moving average weight).
+_PSNR_EMA = 0.9
+
+
+def train(cfg, data, run_dir, resume=False, progress=True):
+    """Train a VeloGauss model on `data` (velogauss.data.SceneData); return it in eval mode.
+
+    cfg: velogauss.config.Config; run_dir: the run folder (config.toml, checkpoints/,
+    log.jsonl); resume: continue from `run_dir`'s latest checkpoint (the config must match
+    the one it was trained with, except `train.iterations`, which may grow).
+    """
+    run_dir = Path(run_dir)
+    device = torch.device(cfg.train.device)
+    extent = camera_extent([f.camera for f in data.train])
+    if resume:
+        payload = load_checkpoint(run_dir, device)
+        profile = profile_from_dict(payload["profile"])
+        model = model_from_state(cfg, profile, payload["model"])
+        model.load_state_dict(payload["model"])
+        model.to(device)
+        rng = np.random.default_rng()
+        rng.bit_generator.state = payload["numpy_rng"]
+        torch.set_rng_state(payload["torch_rng"])
+        start, extra = payload["iteration"], payload["extra"]
+        _truncate_log(run_dir / "log.jsonl", start)
+    else:
+        rng = np.random.default_rng(cfg.train.seed)
+        torch.manual_seed(cfg.train.seed)
+        profile = scene_profile(cfg, data.metadata)
+        points, colors = _initial_points(data, cfg.model.init_points, rng)
+        model = build_model(cfg, profile, points, colors, rng).to(device)
+        start, extra = 0, {"elapsed_s": 0.0, "after_reset": False}
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_text(run_dir / "config.toml", to_toml(cfg))
+        write_text(run_dir / "log.jsonl", "")
+    optimizer = make_optimizer(model, cfg.train, extent)
+    stats = DensityStats(len(model.gaussians), device=device)
+    if resume:
+        optimizer.load_state_dict(payload["optimizer"])
+        stats.load_state_dict(payload["density"])
+    loop = _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device)
+    loop.run(start, progress)
+    return model.eval()
+
+
+class _Loop:
+    """The state of one training run between iterations."""
+
+    def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device):
+        self.cfg, self.data, self.run_dir = cfg, data, run_dir
+        self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile
+        self.rng, self.extent, self.extra, self.device = rng, extent, extra, device
+        self.switches = ABLATION_SWITCHES[cfg.model.ablation]
+        self.images = [torch.as_tensor(f.image, device=device) for f in data.train]
+        self.sampler = FrameSampler([f.time for f in data.train], cfg.train.warmup, cfg.train.curriculum,
+                                    model.motion is not None)
+        self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
+        self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
+
+    def run(self, start, progress):
+        cfg = self.cfg.train
+        bar = tqdm(range(start, cfg.iterations), initial=start, total=cfg.iterations, disable=not progress,
+                   desc="train", dynamic_ncols=True)
+        psnr_ema, loss_value = None, float("nan")
+        clock = time.perf_counter()
+        with _deferred_interrupt() as interrupted:
+            for it in bar:
+                loss_value, frame_psnr = self.step(it)
+                psnr_ema = frame_psnr if psnr_ema is None else _PSNR_EMA * psnr_ema + (1 - _PSNR_EMA) * frame_psnr
+                done = it + 1
+                self.maintain(done)
+                bar.set_postfix(loss=f"{loss_value:.4f}", psnr=f"{psnr_ema:.2f}", n=len(self.model.gaussians),
+                                refresh=False)
+                elapsed = self.extra["elapsed_s"] + time.perf_counter() - clock
+                if cfg.eval_every and (done % cfg.eval_every == 0 or done == cfg.iterations):
+                    self.log_eval(done, loss_value, psnr_ema, elapsed)
+                last = done == cfg.iterations
+                if interrupted() or last or (cfg.checkpoint_every and done % cfg.checkpoint_every == 0):
+                    self.checkpoint(done, elapsed)
+                if interrupted():
+                    bar.close()
+                    raise KeyboardInterrupt(f"training interrupted; checkpoint at iteration {done} in {self.run_dir}")
+        if start >= cfg.iterations:
+            bar.close()
+
+    def step(self, it):
+        """One optimisation step; returns (loss, PSNR of the rendered view)."""
+        cfg, model = self.cfg, self.model
+        set_learning_rates(self.optimizer, it, cfg.train, self.extent)
+        index = self.sampler.sample(it, self.rng)
+        frame, gt = self.data.train[index], self.images[index]
+        means, quats, scales, base = model.state_at(frame.time)
+        image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
+        meta["mean2d"].retain_grad()
+        loss = photometric_loss(image, gt)
+        motion_on = model.motion is not None and it >= cfg.train.warmup
+        if motion_on and model.has_velocity and model.motion.use_adf:
+            loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
+        if motion_on and self.switches.gpc and model.has_velocity:
+            loss = loss + self.physics_loss(it)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad = meta["mean2d"].grad
+        if grad is not None:
+            self.stats.add(grad.detach(), meta["radius"], meta["valid"], frame.camera.width, frame.camera.height)
+        self.optimizer.step()
+        with torch.no_grad():
+            frame_psnr = float(psnr(image.detach().clamp(0, 1), gt))
+        return float(loss.detach()), frame_psnr
+
+    def physics_loss(self, it):
+        """Ramped VG-LOSS-PHYS on fresh collocation points."""
+        p = self.cfg.physics
+        ramp = min(1.0, (it - self.cfg.train.warmup + 1) / max(1, p.ramp))
+        x, t = collocation_points(self.data.bounds, p.bounds_margin, p.n_points, self.rng, torch.float32, self.device)
+        r, div = self.model.motion.residuals(x, t, divergence=self.profile.divergence)
+        return physics_loss(r, div, ramp * p.lambda_transport, ramp * p.lambda_div)
+
+    def maintain(self, done):
+        """Density control, opacity resets and static detection due after `done` iterations."""
+        d, model = self.cfg.densify, self.model
+        if d.start < done <= d.until and done % d.every == 0:
+            densify_and_prune(model, self.optimizer, self.stats, d, self.extent, self.extra["after_reset"],
+                              torch_generator(self.rng))
+        if d.opacity_reset_every and done % d.opacity_reset_every == 0 and done <= d.until:
+            reset_opacity(model, self.optimizer)
+            self.extra["after_reset"] = True
+        window_open = done >= self.cfg.train.warmup + self.cfg.train.curriculum
+        if model.motion is not None and d.static_every and window_open and done % d.static_every == 0:
+            model.set_moving(detect_moving(model, self.cfg.data.max_time, STATIC_DISPLACEMENT_MAX))
+
+    def log_eval(self, done, loss_value, train_psnr, elapsed):
+        """Append one evaluation record to log.jsonl."""
+        with torch.no_grad():
+            scores = [float(psnr(self.model.render(f.camera, f.time, self.background)[0].clamp(0, 1),
+                                 torch.as_tensor(f.image, device=self.device))) for f in self.eval_frames]
+        record = {"iteration": done, "loss": loss_value, "train_psnr": train_psnr,
+                  "interp_psnr": float(np.mean(scores)) if scores else None,
+                  "n_gaussians": len(self.model.gaussians), "n_moving": int(self.model.moving.sum()),
+                  "elapsed_s": round(elapsed, 3)}
+        with open(self.run_dir / "log.jsonl", "a") as handle:
+            handle.write(json.dumps(record) + "\n")
+
+    def checkpoint(self, done, elapsed):
+        self.extra["elapsed_s"] = elapsed
+        save_checkpoint(self.run_dir, self.cfg, self.profile, self.model, self.optimizer, self.stats, self.rng, done,
+                        self.extra)
+
+
+def _initial_points(data, n_random, rng):
+    """The scene's point cloud, or `n_random` uniform points in its box (grey)."""
+    if data.points is not None and len(data.points) >= 2:
+        return data.points, data.point_colors
+    lo, hi = data.bounds
+    return rng.uniform(lo, hi, size=(n_random, 3)), None
+
+
+def _spread(frames, n):
+    if len(frames) <= n:
+        return list(frames)
+    return [frames[int(i)] for i in np.linspace(0, len(frames) - 1, n).round()]
+
+
+def _truncate_log(path, iteration):
+    """Drop log records after `iteration` (written by a run that then stopped uncheckpointed)."""
+    if not path.is_file():
+        return
+    kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["iteration"] <= iteration]
+    write_text(path, "".join(line + "\n" for line in kept))
+
+
+@contextlib.contextmanager
+def _deferred_interrupt():
+    """Turn SIGINT into a flag checked between iterations (main thread only), so Ctrl-C
+    never interrupts an optimiser step or a checkpoint write half-way."""
+    flag = {"set": False}
+    try:
+        previous = signal.signal(signal.SIGINT, lambda *_: flag.update(set=True))
+    except ValueError:  # not the main thread: leave SIGINT alone
+        previous = None
+    try:
+        yield lambda: flag["set"]
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)

@@ -1,0 +1,74 @@
+"""Adam with 3DGS-style parameter groups and learning-rate schedules, and the optimiser
+surgery that densification needs.
+
+Groups: one per Gaussian field (means, log_scales, quats, opacity_logits, sh_dc, sh_rest)
+and one for the motion networks. Means and motion decay exponentially from their initial
+to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
+camera extent, as in 3DGS. The motion rate runs its decay from the end of the warm-up.
+"""
+
+import math
+
+import torch
+
+from velogauss.model.gaussians import FIELDS
+
+# Adam's epsilon of 3DGS: 1e-15, so the tiny gradients of far-away Gaussians still move them.
+ADAM_EPS = 1e-15
+
+
+def make_optimizer(model, train_cfg, extent):
+    """Adam over the model's parameters with the groups of the module docstring."""
+    t = train_cfg
+    lrs = {"means": t.lr_means * extent, "log_scales": t.lr_scales, "quats": t.lr_quats,
+           "opacity_logits": t.lr_opacity, "sh_dc": t.lr_sh, "sh_rest": t.lr_sh / 20.0}
+    groups = [{"params": [getattr(model.gaussians, name)], "lr": lrs[name], "name": name} for name in FIELDS]
+    if model.motion is not None:
+        groups.append({"params": list(model.motion.parameters()), "lr": t.lr_motion, "name": "motion"})
+    return torch.optim.Adam(groups, lr=0.0, eps=ADAM_EPS)
+
+
+def set_learning_rates(optimizer, iteration, train_cfg, extent):
+    """Means and motion rates at `iteration` (log-linear decay to the final values)."""
+    t = train_cfg
+    progress = min(1.0, iteration / max(1, t.iterations))
+    motion_progress = min(1.0, max(0, iteration - t.warmup) / max(1, t.iterations - t.warmup))
+    for group in optimizer.param_groups:
+        if group["name"] == "means":
+            group["lr"] = _log_lerp(t.lr_means * extent, t.lr_means_final * extent, progress)
+        elif group["name"] == "motion":
+            group["lr"] = _log_lerp(t.lr_motion, t.lr_motion_final, motion_progress)
+
+
+def update_gaussian_groups(optimizer, gaussians, keep, new_rows):
+    """Keep the rows `keep` (bool (N,)) of every Gaussian field, append `new_rows`, and carry
+    Adam's moments along (zero for the new rows), so optimisation continues seamlessly.
+
+    new_rows: dict field -> (M, ...) tensor. Updates `gaussians` in place.
+    """
+    tensors = {}
+    for group in optimizer.param_groups:
+        name = group["name"]
+        if name not in FIELDS:
+            continue
+        old = group["params"][0]
+        tensors[name] = torch.cat([old.detach()[keep], new_rows[name].detach()])
+    gaussians.set_tensors(tensors)
+    for group in optimizer.param_groups:
+        name = group["name"]
+        if name not in FIELDS:
+            continue
+        old = group["params"][0]
+        new = getattr(gaussians, name)
+        state = optimizer.state.pop(old, None)
+        if state:
+            extra = new_rows[name].shape[0]
+            for key in ("exp_avg", "exp_avg_sq"):
+                moment = state[key][keep]
+                state[key] = torch.cat([moment, moment.new_zeros((extra,) + moment.shape[1:])])
+            optimizer.state[new] = state
+        group["params"][0] = new
+
+
+def _log_lerp(start, end, progress):
+    return math.exp((1.0 - progress) * math.log(start) + progress * math.log(end))

@@ -1,0 +1,56 @@
+"""What each training iteration looks at: a training frame, and physics collocation points.
+
+Frames follow a time curriculum: during the warm-up only the t = 0 frames (the canonical
+state) are drawn; then the window of allowed times opens linearly from 0 to `max_time`
+over `curriculum` iterations, so the velocity is learned from short integrations first.
+A scene without motion draws from every frame at once. Collocation points (VG-TRANSPORT,
+VG-DIV) are uniform over the scene box, grown by a margin, at one uniform time in [0, 1]
+per iteration: the future is constrained too.
+"""
+
+import numpy as np
+import torch
+
+
+class FrameSampler:
+    """Draws training frame indices by the curriculum of the module docstring.
+
+    times: (F,) frame times; warmup, curriculum: iterations; moving: the scene has motion.
+    """
+
+    def __init__(self, times, warmup, curriculum, moving):
+        self.times = np.asarray(times, dtype=np.float64)
+        self.warmup, self.curriculum, self.moving = int(warmup), int(curriculum), bool(moving)
+        self.t0 = float(self.times.min())
+        self.t1 = float(self.times.max())
+
+    def window(self, iteration):
+        """Latest time that may be drawn at `iteration`."""
+        if not self.moving:
+            return self.t1
+        if iteration < self.warmup:
+            return self.t0
+        opened = min(1.0, (iteration - self.warmup + 1) / max(1, self.curriculum))
+        return self.t0 + opened * (self.t1 - self.t0)
+
+    def sample(self, iteration, rng):
+        """One frame index allowed at `iteration`, uniformly among the allowed frames."""
+        allowed = np.flatnonzero(self.times <= self.window(iteration) + 1e-9)
+        return int(allowed[rng.integers(len(allowed))])
+
+
+def collocation_points(bounds, margin, n_points, rng, dtype, device):
+    """(x (n_points, 3) uniform in `bounds (2, 3)` grown by `margin` of its size per side,
+    t uniform in [0, 1])."""
+    lo, hi = np.asarray(bounds[0], dtype=np.float64), np.asarray(bounds[1], dtype=np.float64)
+    pad = margin * (hi - lo)
+    x = rng.uniform(lo - pad, hi + pad, size=(n_points, 3))
+    return torch.as_tensor(x, dtype=dtype, device=device), float(rng.uniform(0.0, 1.0))
+
+
+def camera_extent(cameras):
+    """3DGS's scene scale: 1.1 times the largest distance of a camera centre from their mean."""
+    centres = np.stack([c.centre for c in cameras])
+    radius = np.linalg.norm(centres - centres.mean(axis=0), axis=1).max()
+    # A single camera (or coincident ones) has no spread: fall back to its distance from the origin.
+    return 1.1 * float(radius if radius > 0 else np.linalg.norm(centres[0]) or 1.0)

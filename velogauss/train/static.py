@@ -1,0 +1,33 @@
+"""Detect the particles that do not move over the observed window, so they are not integrated.
+
+A particle's motion at time t is bounded by how far any point within one standard
+deviation of it moves: |x(t) − x0| + s_max · angle(q(t), q0) + max |s(t) − s0|. A particle
+whose bound stays below `threshold` at every probe time in [0, max_time] is static: the
+model renders it at its canonical state (`VeloGaussModel.moving`), skipping its
+integration and ADF. Detection re-examines every particle, so one frozen too early moves
+again at the next detection once the shared motion networks say it should.
+"""
+
+import torch
+
+# Probe times: the observed window [0, max_time] at this many evenly spaced points.
+_PROBES = 5
+
+
+def detect_moving(model, max_time, threshold):
+    """bool (N,): particles whose motion bound exceeds `threshold` (world units) somewhere in
+    [0, max_time]. Leaves `model.moving` unchanged."""
+    g = model.gaussians
+    saved = model.moving
+    with torch.no_grad():
+        model.set_moving(torch.ones_like(saved))
+        x0, s0 = g.means, g.scales
+        q0 = torch.nn.functional.normalize(g.quats, dim=1)
+        bound = torch.zeros(len(g), dtype=x0.dtype, device=x0.device)
+        for t in torch.linspace(0.0, max_time, _PROBES).tolist():
+            x, q, s, _ = model.state_at(t)
+            angle = 2 * torch.acos((q * q0).sum(1).abs().clamp(max=1.0))
+            step = (x - x0).norm(dim=1) + s0.max(dim=1).values * angle + (s - s0).abs().max(dim=1).values
+            bound = torch.maximum(bound, step)
+        model.set_moving(saved)
+    return bound > threshold

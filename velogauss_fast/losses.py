@@ -1,0 +1,41 @@
+"""Training losses in torch: photometric and physics. Twin of `velogauss_ref.losses`.
+
+spec/losses_metrics.md, VG-LOSS and VG-LOSS-PHYS. Results are 0-d tensors in the inputs'
+dtype and on their device.
+"""
+
+from velogauss_fast.checks import check_array
+from velogauss_fast.metrics import ssim
+from velogauss_ref.constants import LAMBDA_DSSIM
+from velogauss_ref.losses import check_weight
+
+
+def photometric_loss(pred, gt):
+    """(1 - LAMBDA_DSSIM) mean|pred - gt| + LAMBDA_DSSIM (1 - SSIM(pred, gt)) (VG-LOSS).
+
+    pred, gt: (H, W, 3) tensors with H, W >= SSIM_WINDOW; SSIM as in
+    `velogauss_fast.metrics.ssim`. The L1 term passes a zero gradient where pred == gt.
+    Bad input raises ValueError naming the argument.
+    """
+    d_ssim = 1.0 - ssim(pred, gt)  # validates pred and gt first
+    return (1.0 - LAMBDA_DSSIM) * (pred - gt).abs().mean() + LAMBDA_DSSIM * d_ssim
+
+
+def physics_loss(r, div, lambda_transport, lambda_div):
+    """lambda_transport mean_i |r_i|^2 + lambda_div mean_i div_i^2 (VG-LOSS-PHYS).
+
+    r: (N, 3); div: (N,) or None (compressible scene: the second term is dropped);
+    lambda_transport, lambda_div: finite numbers >= 0. N = 0 gives 0. Bad input raises
+    ValueError naming the argument.
+    """
+    check_array("r", r, (None, 3))
+    n = r.shape[0]
+    if div is not None:
+        check_array("div", div, (n,))
+    check_weight("lambda_transport", lambda_transport)
+    check_weight("lambda_div", lambda_div)
+    count = max(n, 1)  # an empty sum over max(N, 1) is the 0 of "no particle"
+    loss = lambda_transport * (r * r).sum() / count
+    if div is not None:
+        loss = loss + lambda_div * (div * div).sum() / count
+    return loss

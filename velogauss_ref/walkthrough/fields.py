@@ -1,0 +1,183 @@
+"""Walkthrough part: the affine velocity model, from basis to Eulerian field
+(VG-BASIS, VG-CODE, VG-COEF, VG-VEL, VG-FIELD)."""
+
+import numpy as np
+
+from velogauss_ref.motion.basis import affine_from_coefficients, basis_matrix
+from velogauss_ref.motion.code import physics_code
+from velogauss_ref.motion.coefficients import coefficients, mixing_weights, motion_patterns
+from velogauss_ref.motion.velocity import velocity, velocity_field
+from velogauss_ref.walkthrough.figures import COLUMN_COLOURS, COLUMN_LABELS, new_figure, save
+from velogauss_ref.walkthrough.printing import Section, session
+from velogauss_ref.walkthrough.setups import CFG, coefficient_vector, learned_motion_params
+
+# Two canonical positions whose codes mix the motion patterns differently (VG-COEF's figure).
+X_A, X_B = np.array([[-0.6, 0.3, 0.0]]), np.array([[0.7, -0.4, 0.2]])
+
+
+def basis_section(figures):
+    """VG-BASIS: Phi at one point, Phi w = A(w) x + b(w); the 12 basis fields as quiver plots."""
+    x = np.array([[1.0, 2.0, 3.0]])
+    w = np.round(np.random.default_rng(1).standard_normal((1, 12)), 2)
+    A, b = affine_from_coefficients(w)
+    return Section(
+        "VeloGauss does not let a network output velocities directly. Locally, any smooth motion is "
+        "affine to first order, `v ≈ A x + b`: 12 degrees of freedom, spanned by 12 fixed fields "
+        "of x: 3 translations, 3 rotations, 3 stretches and 3 shears. The networks only choose the "
+        "12 coefficients `w`, so every velocity they produce is a physically readable mixture (spin "
+        "`ω = (w4, w5, w6)`, divergence `w7 + w8 + w9`, ...). The example evaluates Φ at one point and "
+        "checks `Φ(x) w = A(w) x + b(w)` for random `w`.",
+        [session({"x": x}, "Phi = basis_matrix(x)", {"Phi[0]": basis_matrix(x)[0]},
+                 {"w": w}, "A, b = affine_from_coefficients(w)", {"A": A[0], "b": b[0]},
+                 "basis_matrix(x)[0] @ w[0], A[0] @ x[0] + b[0]",
+                 {"Phi w": basis_matrix(x)[0] @ w[0], "A x + b": A[0] @ x[0] + b[0]}),
+         _basis_figure(figures)],
+    )
+
+
+def _basis_figure(figures):
+    """The 12 columns of Phi on the slice z = 0.5: arrows in-plane (vx, vy), colour out-of-plane vz."""
+    u = np.linspace(-1, 1, 9)
+    gx, gy = np.meshgrid(u, u)
+    points = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, 0.5)], axis=-1)
+    Phi = basis_matrix(points)  # (81, 3, 12)
+    fig = new_figure(11, 8.6)
+    axes = fig.subplots(3, 4).T.ravel()  # one column of panels per group
+    for k, ax in enumerate(axes):
+        v = Phi[:, :, k]
+        shown = ax.imshow(v[:, 2].reshape(gx.shape), origin="lower", extent=(-1.125, 1.125, -1.125, 1.125),
+                          cmap="coolwarm", vmin=-1.5, vmax=1.5)
+        ax.quiver(points[:, 0], points[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=4,
+                  pivot="mid", color="k")
+        ax.set(title=COLUMN_LABELS[k], xticks=(-1, 0, 1), yticks=(-1, 0, 1))
+        ax.title.set_color(COLUMN_COLOURS[k])
+    fig.colorbar(shown, ax=axes.tolist(), shrink=0.6, label="out-of-plane component v_z")
+    return save(fig, figures, "basis-fields",
+                "The 12 basis fields Φ(x)[:, k] on the slice z = 0.5 of [-1, 1]³: arrows are the in-plane part "
+                "(v_x, v_y), the background colour the out-of-plane part v_z (w3 and w9 have no arrows: they "
+                "move straight through the slice). Columns: translation, rotation, stretch, shear.")
+
+
+def code_section(figures):
+    """VG-CODE: the codes of three canonical positions, two of them 1e-3 apart."""
+    params = learned_motion_params()
+    x0 = np.concatenate([X_A, X_B, X_A + 1e-3])
+    return Section(
+        "A scene holds several bodies that move differently. Each Gaussian carries a small latent "
+        "*physics code*, computed once from its canonical position by an MLP on γ(x0); the code "
+        "decides how the shared motion patterns are mixed for this particle (VG-COEF). It is a "
+        "material property: a particle keeps the code of where it started. The example uses the "
+        f"walkthrough's small configuration (code size L = {CFG.code_dim}); nearby points get nearby codes.",
+        [session({"x0": x0}, "z = physics_code(params, x0, cfg)", {"z": physics_code(params, x0, CFG)})],
+    )
+
+
+def coefficients_section(figures):
+    """VG-COEF: two codes' mixtures of the K patterns; patterns and w(t) over time."""
+    params = learned_motion_params()
+    z = physics_code(params, np.concatenate([X_A, X_B]), CFG)
+    t = 0.5
+    m, P = mixing_weights(params, z), motion_patterns(params, t, CFG)
+    return Section(
+        f"The 12 coefficients of a particle come from K = {CFG.n_patterns} shared *motion patterns* `P(t)`, "
+        "each a 12-vector that evolves in time (one time network, evaluated once per time for all "
+        "particles), mixed by softmax weights `m(z)` that depend only on the particle's code. Two "
+        "particles with the same code move alike; a rigid body is one code. The example takes the "
+        "codes of two points and compares their mixtures.",
+        [session({"z": z, "t": t}, "m = mixing_weights(params, z)  # softmax(z A + c), rows sum to 1",
+                 {"m": m, "m.sum(axis=1)": m.sum(axis=1)},
+                 "P = motion_patterns(params, t, cfg)  # (K, 12)", {"P": P},
+                 "w = coefficients(params, t, z, cfg)", {"w": coefficients(params, t, z, CFG), "m @ P": m @ P}),
+         _coefficients_figure(figures, params, z)],
+    )
+
+
+def _coefficients_figure(figures, params, z):
+    times = np.linspace(0, 1, 41)
+    patterns = np.stack([motion_patterns(params, t, CFG) for t in times])  # (T, K, 12)
+    w = np.stack([coefficients(params, t, z, CFG) for t in times])  # (T, 2, 12)
+    m = mixing_weights(params, z)
+    fig = new_figure(12, 6.2)
+    top, bottom = fig.subfigures(2, 1)
+    lim = np.abs(patterns).max() * 1.05
+    for k, ax in enumerate(top.subplots(1, CFG.n_patterns, sharey=True)):
+        for column in range(12):
+            ax.plot(times, patterns[:, k, column], color=COLUMN_COLOURS[column])
+        ax.set(title=f"pattern P_{k + 1}(t)", xlabel="t", ylim=(-lim, lim))
+    ax_m, ax_a, ax_b = bottom.subplots(1, 3, width_ratios=(0.7, 1, 1))
+    bar = np.arange(1, CFG.n_patterns + 1)
+    ax_m.bar(bar - 0.2, m[0], width=0.4, label="code A", color="0.3")
+    ax_m.bar(bar + 0.2, m[1], width=0.4, label="code B", color="0.7")
+    ax_m.set(xticks=bar, xlabel="pattern k", ylabel="m_k(z)", title="mixing weights")
+    ax_m.legend(fontsize=8)
+    for ax, row, name in ((ax_a, 0, "A"), (ax_b, 1, "B")):
+        for column in range(12):
+            ax.plot(times, w[:, row, column], color=COLUMN_COLOURS[column], label=COLUMN_LABELS[column])
+        ax.set(title=f"w(t) of code {name} = m(z_{name}) P(t)", xlabel="t", ylim=(-lim, lim))
+    ax_b.legend(fontsize=6, ncol=2, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    return save(fig, figures, "coef-patterns",
+                f"Top: the K = {CFG.n_patterns} motion patterns over time, 12 coefficients each (colours: "
+                "translation blue, rotation red, stretch green, shear purple). Bottom: two physics codes mix "
+                "them with different softmax weights, so the same patterns give each particle its own "
+                "coefficients w(t).")
+
+
+def velocity_section(figures):
+    """VG-VEL: a spinning-drifting and a stretching particle, against A(w) x + b(w)."""
+    x = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]])
+    w = np.stack([coefficient_vector(translation=(0.5, 0, 0), rotation=(0, 0, 1)),
+                  coefficient_vector(stretch=(0.5, 0.5, -1.0))])
+    A, b = affine_from_coefficients(w)
+    return Section(
+        "A particle's velocity is the basis evaluated at its position, weighted by its coefficients. "
+        "The first row spins about z at 1 rad per unit time while drifting along x; the second "
+        "stretches in x and y and squeezes in z (divergence 0).",
+        [session({"x": x, "w": w}, "v = velocity(x, w)", {"v": velocity(x, w)},
+                 "# the same as A(w) x + b(w)", {"A x + b": np.einsum("nij,nj->ni", A, x) + b})],
+    )
+
+
+def field_section(figures):
+    """VG-FIELD: the Eulerian field against the particle velocity with a frozen code; field slices."""
+    params = learned_motion_params()
+    x = np.concatenate([X_A, X_B])
+    t = 0.5
+    x_moved = x + np.array([0.3, 0.0, 0.0])
+    z_frozen = physics_code(params, x, CFG)
+    return Section(
+        "The physics constraints are statements about a field `v(x, t)` defined everywhere, not only "
+        "where particles are. The Eulerian field takes the code *at the query point*: "
+        "`v(x, t) = Φ(x) w(t, E(γ(x)))`. A particle that started at x0 uses its own frozen code "
+        "instead; the two agree at the particle's canonical position and differ elsewhere unless the "
+        "code is constant over the body, which is what training drives it to.",
+        [session({"x": x, "t": t}, "v = velocity_field(params, x, t, cfg)", {"v": velocity_field(params, x, t, CFG)},
+                 "velocity(x, coefficients(params, t, physics_code(params, x, cfg), cfg))  # the same, spelt out",
+                 {"v": velocity(x, coefficients(params, t, z_frozen, CFG))},
+                 "# 0.3 further along x: the field uses the new point's code, a particle its frozen code",
+                 {"field": velocity_field(params, x_moved, t, CFG),
+                  "particle": velocity(x_moved, coefficients(params, t, z_frozen, CFG))}),
+         _field_figure(figures, params)],
+    )
+
+
+def _field_figure(figures, params):
+    u = np.linspace(-1, 1, 13)
+    gx, gy = np.meshgrid(u, u)
+    points = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=-1)
+    fig = new_figure(10, 4.0)
+    for ax, t in zip(fig.subplots(1, 3), (0.0, 0.5, 1.0)):
+        v = velocity_field(params, points, t, CFG)
+        speed = np.linalg.norm(v, axis=1)
+        ax.quiver(points[:, 0], points[:, 1], v[:, 0], v[:, 1], speed, cmap="viridis", clim=(0, 2), angles="xy",
+                  scale_units="xy", scale=8, pivot="mid")
+        ax.set(title=f"t = {t:g}", xlabel="x", aspect="equal", xlim=(-1.15, 1.15), ylim=(-1.15, 1.15))
+    fig.axes[0].set_ylabel("y")
+    return save(fig, figures, "field-slices",
+                "velocity_field of the example parameters on the slice z = 0 at three times: in-plane arrows (one "
+                "scale for all panels), colour the speed |v|. Random networks give a smooth but physically "
+                "meaningless field; "
+                "the physics residuals (VG-TRANSPORT, VG-DIV) measure how far from physical it is.")
+
+
+SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
+            "VG-VEL": velocity_section, "VG-FIELD": field_section}

@@ -1,0 +1,123 @@
+"""Walkthrough part: acceleration and the two physics residuals (VG-ACC, VG-TRANSPORT, VG-DIV) on
+a rigid field, a stretching field and a non-physical (random network) field."""
+
+import functools
+
+import numpy as np
+
+from velogauss_ref.physics.acceleration import acceleration_field
+from velogauss_ref.physics.residuals import divergence, transport_residual
+from velogauss_ref.walkthrough.figures import new_figure, save
+from velogauss_ref.walkthrough.printing import Section, number, session
+from velogauss_ref.walkthrough.setups import CFG, coefficient_vector, constant_motion_params, learned_motion_params
+
+SPIN = 1.5  # rad per unit time about z
+STRETCH = np.array([0.5, 0.25, 0.0])
+T = 0.5
+POINTS = np.array([[1.0, 0.0, 0.0], [0.0, -0.5, 0.3], [0.5, 0.5, -0.5]])
+GRID = 9  # residual maps sample a GRID x GRID slice: the reference differentiates point by point
+
+
+def fields():
+    """The three example fields, name -> motion parameters:
+    rigid: v = ω × x about z, with the acceleration set to its centripetal acceleration
+      Ω² x = −SPIN² (x, y, 0), which is the stretch pattern (−SPIN², −SPIN², 0);
+    stretching: v = diag(STRETCH) x, with the acceleration diag(STRETCH)² x (again stretch);
+    random network: learned_motion_params, whose patterns change with t and whose code
+      changes with x, with no acceleration.
+    """
+    return {
+        "rigid": constant_motion_params(coefficient_vector(rotation=(0, 0, SPIN)),
+                                        alpha=coefficient_vector(stretch=(-SPIN**2, -SPIN**2, 0))),
+        "stretching": constant_motion_params(coefficient_vector(stretch=STRETCH),
+                                             alpha=coefficient_vector(stretch=STRETCH**2)),
+        "random network": learned_motion_params(),
+    }
+
+
+def acceleration_section(figures):
+    """VG-ACC: the centripetal acceleration of a rigid spin, against −ω² (x, y, 0)."""
+    params = fields()["rigid"]
+    return Section(
+        "The transport residual below compares the velocity field's own material acceleration "
+        "`Dv/Dt` with a modelled acceleration `a`. If `a` were a free network it could match anything "
+        "and the constraint would teach nothing; so `a` is built like `v` (the 12 basis fields, mixed "
+        "by the same code) with coefficients that are a low-degree polynomial in t per pattern. "
+        "Gravity is degree 0; the centripetal acceleration of a spin is the square of its generator, "
+        "a stretch-and-shear pattern. The example is a spin at "
+        f"{number(SPIN)} rad per unit time about z whose acceleration coefficients are set to "
+        "its centripetal acceleration, −ω² (x, y, 0).",
+        [session({"x": POINTS, "t": T}, "a = acceleration_field(params, x, t, cfg)",
+                 {"a": acceleration_field(params, POINTS, T, CFG),
+                  "−ω² (x, y, 0)": -SPIN**2 * POINTS * [1, 1, 0]})],
+    )
+
+
+def transport_section(figures):
+    """VG-TRANSPORT: residuals of the three example fields (and of a spin without acceleration); maps."""
+    steps = []
+    for name, params in fields().items():
+        steps += [f"transport_residual(params, x, t, cfg)  # {name}", {"r": transport_residual(params, POINTS, T, CFG)}]
+    still = {**fields()["rigid"], "acc": np.zeros_like(fields()["rigid"]["acc"])}
+    steps += ["# rigid, but with no acceleration modelled: the residual is the missing centripetal term",
+              {"r": transport_residual(still, POINTS, T, CFG)}]
+    maps = residual_maps()
+    return Section(
+        "The momentum constraint (paper eq. 7): following a particle, the velocity changes at the rate "
+        "`Dv/Dt = ∂v/∂t + (∇v) v`, and that must be the modelled acceleration. The reference takes "
+        "every derivative with autograd, through the whole field including the code's dependence on "
+        "x. A rigid spin and a uniform stretch satisfy it exactly with their acceleration; a field "
+        "made of random networks does not, and training's physics loss pushes on exactly that.",
+        [session({"x": POINTS, "t": T}, *steps),
+         _maps_figure(figures, "transport-residual", {k: np.linalg.norm(v[0], axis=-1) for k, v in maps.items()},
+                      "|r|", "magma",
+                      "|transport_residual| on the slice z = 0 at t = 0.5, one colour scale: zero for the rigid "
+                      "and the stretching field (each with its true acceleration), non-zero everywhere for "
+                      "the random network field.")],
+    )
+
+
+def divergence_section(figures):
+    """VG-DIV: divergences of the three example fields; maps."""
+    steps = []
+    for name, params in fields().items():
+        steps += [f"divergence(params, x, t, cfg)  # {name}", {"div": divergence(params, POINTS, T, CFG)}]
+    maps = residual_maps()
+    return Section(
+        "Mass conservation of an incompressible material (paper eq. 8): `∇·v = 0`, volume is neither "
+        "created nor destroyed. The divergence of an affine field is the trace of A, `w7 + w8 + w9`. "
+        "The two residuals test different things: the stretching field is perfectly consistent "
+        f"with its acceleration but grows volume at the rate {number(STRETCH.sum())}, so it only fits "
+        "a scene declared compressible (where the divergence term is dropped).",
+        [session({"x": POINTS, "t": T}, *steps),
+         _maps_figure(figures, "divergence", {k: v[1] for k, v in maps.items()}, "∇·v", "coolwarm",
+                      "divergence on the slice z = 0 at t = 0.5, one symmetric colour scale: 0 for the rigid "
+                      f"spin, {number(STRETCH.sum())} everywhere for the stretch, varying for the random network "
+                      "field.")],
+    )
+
+
+@functools.cache
+def residual_maps():
+    """name -> (r (GRID, GRID, 3), div (GRID, GRID)) of each example field on the slice z = 0, t = T."""
+    u = np.linspace(-1, 1, GRID)
+    gx, gy = np.meshgrid(u, u)
+    points = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=-1)
+    return {name: (transport_residual(params, points, T, CFG).reshape(GRID, GRID, 3),
+                   divergence(params, points, T, CFG).reshape(GRID, GRID))
+            for name, params in fields().items()}
+
+
+def _maps_figure(figures, name, maps, label, cmap, caption):
+    fig = new_figure(10, 3.4)
+    largest = max(np.abs(m).max() for m in maps.values())
+    limits = (-largest, largest) if cmap == "coolwarm" else (0, largest)
+    for ax, (field, values) in zip(fig.subplots(1, 3), maps.items()):
+        shown = ax.imshow(values, origin="lower", extent=(-1.125, 1.125, -1.125, 1.125), cmap=cmap,
+                          vmin=limits[0], vmax=limits[1], interpolation="nearest")
+        ax.set(title=f"{field}\nlargest magnitude {number(np.abs(values).max())}", xlabel="x", ylabel="y")
+    fig.colorbar(shown, ax=fig.axes, shrink=0.8, label=label)
+    return save(fig, figures, name, caption)
+
+
+SECTIONS = {"VG-ACC": acceleration_section, "VG-TRANSPORT": transport_section, "VG-DIV": divergence_section}
