@@ -239,16 +239,16 @@ def export_command(
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects")
 
 
 @app.command("bench")
 def bench_command(
-    which: str = typer.Argument(..., help="raster | motion."),
+    which: str = typer.Argument(..., help="raster | motion | accuracy | effects."),
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):
-    """Run a benchmark (velogauss.bench.raster or velogauss.bench.motion) and record it in RESULTS.md."""
+    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy or .effects) and record it in RESULTS.md."""
     with user_errors():
         if which not in BENCHMARKS:
             raise ValueError(f"WHICH: expected one of {', '.join(BENCHMARKS)}, got {which!r}")

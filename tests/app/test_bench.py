@@ -31,7 +31,7 @@ def table(body):
     """(header cells, rows of cells) of the one markdown table in a section body."""
     lines = [line for line in body.splitlines() if line.startswith("|")]
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines]
-    assert set(cells[1]) <= {"---"}, lines[1]
+    assert set(cells[1]) <= {"---", "---:"}, lines[1]
     assert all(len(row) == len(cells[0]) for row in cells), lines
     return cells[0], cells[2:]
 
@@ -90,3 +90,21 @@ def test_worker_prints_one_json_result(capsys, one_thread, bench, argv, key):
     bench.main([*argv, *one_thread])
     result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert len(result["times"]) == 1 and result["median_s"] > 0 and key in result
+
+
+def test_effects_bench_quick(tmp_path):
+    from velogauss.bench import effects
+
+    threads = torch.get_num_threads()
+    try:
+        rows = effects.run(tmp_path / "RESULTS.md", quick=True)
+    finally:
+        torch.set_num_threads(threads)
+    header, cells = table(section((tmp_path / "RESULTS.md").read_text(), effects.SECTION[3:]))
+    assert len(cells) == len(rows) == 4
+    every, declared, frozen, static = rows
+    # What each profile builds follows from the scene's declaration (multi: rigid, with a static ground).
+    assert (every["columns"], declared["columns"], static["columns"]) == (12, 6, 0)
+    assert 0 < frozen["moving"] < declared["moving"] == declared["n"]
+    # A static scene builds no motion: its physics cost is exactly nothing.
+    assert static["physics_s"] == 0.0 and every["physics_s"] > 0

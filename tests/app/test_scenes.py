@@ -9,7 +9,7 @@ from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.scenes import DEFAULT_SCENE, EFFECTS, SCENES, load_ground_truth, make_scene
 from velogauss.scenes.bodies import Body, Texture
 from velogauss.scenes.motions import LinearFlowMotion, RigidMotion, StaticMotion
-from velogauss.scenes.raycast import cast_rays, intersect_primitive
+from velogauss.scenes.raycast import cast_rays, intersect_primitive, shade, world_normal
 from velogauss.scenes.scene import AnalyticScene
 
 # Closed-form intersections evaluated in float64: agreement to rounding.
@@ -94,6 +94,25 @@ def test_cast_through_a_spun_box_sees_it_turned():
     # At t = 0 the bar's long axis is x; a quarter turn later (t = 1) it is y.
     np.testing.assert_allclose(cast_rays([bar], origins, dirs, 0.0).distance, [4.5, 4.8], atol=TIGHT)
     np.testing.assert_allclose(cast_rays([bar], origins, dirs, 1.0).distance, [4.8, 4.5], atol=TIGHT)
+
+
+@pytest.mark.parametrize("name", ["spin", "shear"])
+def test_material_points_keep_their_colour_as_bodies_move(name, rng):
+    # A ray aimed straight at a tracked surface point sees the same colour at t = 0 and at
+    # t = 0.7, although the point's world normal has turned: shading uses the t = 0 pose.
+    scene = SCENES[name]()
+    body = scene.bodies[0]
+    p, n_p = body.sample_surface(30, rng)
+    colours, normals = [], []
+    for t in (0.0, 0.7):
+        L, o = body.to_world(t)
+        x, n = p @ L.T + o, world_normal(L, n_p)
+        hits = cast_rays(scene.bodies, x + 0.5 * n, -n, t)
+        assert np.all(hits.body == 0)
+        colours.append(shade(scene.bodies, hits.body, hits.point, hits.shading_normal, scene.light, scene.ambient))
+        normals.append(hits.normal)
+    np.testing.assert_allclose(colours[1], colours[0], atol=TIGHT)
+    assert np.abs(normals[1] - normals[0]).max() > 0.1  # the faces did turn
 
 
 def test_nearest_body_occludes():

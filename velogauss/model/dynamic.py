@@ -32,6 +32,9 @@ class VeloGaussModel(nn.Module):
         self.motion = motion
         self.max_time = float(max_time)
         self.adf_clamp_time = bool(adf_clamp_time)
+        # Training switches the ADF off until it starts learning (velogauss.train.loop): its
+        # last layer starts at zero, so skipping it is then exactly the identity, and cheaper.
+        self.adf_enabled = True
         self.register_buffer("moving", torch.ones(len(gaussians), dtype=torch.bool))
 
     @property
@@ -57,7 +60,7 @@ class VeloGaussModel(nn.Module):
         else:
             xs, qs, ss = x0m, q0m, s0m
         x, q, s = xs, normalize_quat(qs), ss
-        if self.motion.use_adf:
+        if self.motion.use_adf and self.adf_enabled:
             t_adf = min(float(t), self.max_time) if self.adf_clamp_time else t
             dx, dq, ds = self.motion.adf_residual(x0m, t_adf, z)
             x, q, s = compose_state(xs, qs, ss, dx, dq, ds)

@@ -62,14 +62,15 @@ def spin():
 
 
 def toss():
-    """A spinning box thrown from (−0.5, 0, −0.5) with velocity (1, 0, 4) under gravity 8.
+    """A box spinning at 2 rad per unit time, thrown from (−0.5, 0, −0.5) with velocity (1, 0, 4)
+    under gravity 8.
 
     The centre follows `z = −0.5 + 4 t − 4 t²`: apex 0.5 at t = 0.5, back to −0.5 at
     t = 1, while x drifts from −0.5 to 0.5, so the box stays in view over [0, 1].
     """
     box = Body("box", "box", centre=(-0.5, 0.0, -0.5), size=(0.42, 0.3, 0.24), rotation=_tilt((0.2, 0.3, 0.0)),
                texture=Texture("checker", (_RED, _YELLOW), frequency=2.0),
-               motion=RigidMotion(centre=(-0.5, 0.0, -0.5), omega=4.0 * _unit((1.0, 0.4, 0.2)),
+               motion=RigidMotion(centre=(-0.5, 0.0, -0.5), omega=2.0 * _unit((1.0, 0.4, 0.2)),
                                   velocity=(1.0, 0.0, 4.0), gravity=(0.0, 0.0, -8.0)))
     return AnalyticScene("toss", [box], effects=["translation", "rotation", "gravity"], incompressible=True)
 

@@ -98,6 +98,9 @@ class _Loop:
                                     model.motion is not None)
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
+        # deform-only has no velocity to learn first: its ADF is the motion and starts with it.
+        default_start = cfg.train.warmup if not model.has_velocity else cfg.train.warmup + cfg.train.curriculum
+        self.adf_start = default_start if cfg.train.adf_start < 0 else cfg.train.adf_start
 
     def run(self, start, progress):
         cfg = self.cfg.train
@@ -124,6 +127,7 @@ class _Loop:
                     raise KeyboardInterrupt(f"training interrupted; checkpoint at iteration {done} in {self.run_dir}")
         if start >= cfg.iterations:
             bar.close()
+        self.model.adf_enabled = True
 
     def step(self, it):
         """One optimisation step; returns (loss, PSNR of the rendered view)."""
@@ -131,11 +135,13 @@ class _Loop:
         set_learning_rates(self.optimizer, it, cfg.train, self.extent)
         index = self.sampler.sample(it, self.rng)
         frame, gt = self.data.train[index], self.images[index]
+        motion_on = model.motion is not None and it >= cfg.train.warmup
+        if model.motion is not None:
+            self.freeze_motion(it)
         means, quats, scales, base = model.state_at(frame.time)
         image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
         meta["mean2d"].retain_grad()
         loss = photometric_loss(image, gt)
-        motion_on = model.motion is not None and it >= cfg.train.warmup
         if motion_on and model.has_velocity and model.motion.use_adf:
             loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
         if motion_on and self.switches.gpc and model.has_velocity:
@@ -149,6 +155,22 @@ class _Loop:
         with torch.no_grad():
             frame_psnr = float(psnr(image.detach().clamp(0, 1), gt))
         return float(loss.detach()), frame_psnr
+
+    def freeze_motion(self, it):
+        """Motion networks train from the warm-up's end, the ADF from `adf_start` (default: once
+        the curriculum has opened the whole window, so the velocity, not the ADF, learns the
+        motion; the ADF then refines what the affine velocity cannot represent).
+
+        Frozen parameters get no gradient at all: a zero gradient would still advance Adam's
+        step count, and its bias correction would later inflate their first real updates.
+        """
+        t = self.cfg.train
+        motion = self.model.motion
+        motion.requires_grad_(it >= t.warmup)
+        if motion.use_adf:
+            adf_on = it >= self.adf_start
+            motion.adf.requires_grad_(adf_on)
+            self.model.adf_enabled = adf_on
 
     def physics_loss(self, it):
         """Ramped VG-LOSS-PHYS on fresh collocation points."""

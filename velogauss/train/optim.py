@@ -1,8 +1,11 @@
 """Adam with 3DGS-style parameter groups and learning-rate schedules, and the optimiser
 surgery that densification needs.
 
-Groups: one per Gaussian field (means, log_scales, quats, opacity_logits, sh_dc, sh_rest)
-and one for the motion networks. Means and motion decay exponentially from their initial
+Groups: one per Gaussian field (means, log_scales, quats, opacity_logits, sh_dc, sh_rest),
+one for the motion networks and one for the acceleration polynomial Q (VG-ACC). Q gets its
+own, larger rate: Adam moves a parameter by about its rate per step, and Q's entries must
+reach |v|²/L (a spin of 4 rad per unit time has centripetal coefficients of 16), where
+the networks' weights stay O(1). Means and motion decay exponentially from their initial
 to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
 camera extent, as in 3DGS. The motion rate runs its decay from the end of the warm-up.
 """
@@ -24,7 +27,11 @@ def make_optimizer(model, train_cfg, extent):
            "opacity_logits": t.lr_opacity, "sh_dc": t.lr_sh, "sh_rest": t.lr_sh / 20.0}
     groups = [{"params": [getattr(model.gaussians, name)], "lr": lrs[name], "name": name} for name in FIELDS]
     if model.motion is not None:
-        groups.append({"params": list(model.motion.parameters()), "lr": t.lr_motion, "name": "motion"})
+        acc = [model.motion.acc] if model.motion.profile.acceleration else []
+        networks = [p for p in model.motion.parameters() if all(p is not a for a in acc)]
+        groups.append({"params": networks, "lr": t.lr_motion, "name": "motion"})
+        if acc:
+            groups.append({"params": acc, "lr": t.lr_acc, "name": "acc"})
     return torch.optim.Adam(groups, lr=0.0, eps=ADAM_EPS)
 
 
@@ -38,6 +45,8 @@ def set_learning_rates(optimizer, iteration, train_cfg, extent):
             group["lr"] = _log_lerp(t.lr_means * extent, t.lr_means_final * extent, progress)
         elif group["name"] == "motion":
             group["lr"] = _log_lerp(t.lr_motion, t.lr_motion_final, motion_progress)
+        elif group["name"] == "acc":
+            group["lr"] = _log_lerp(t.lr_acc, t.lr_acc * t.lr_motion_final / t.lr_motion, motion_progress)
 
 
 def update_gaussian_groups(optimizer, gaussians, keep, new_rows):

@@ -19,6 +19,7 @@ import torch
 
 from velogauss_fast.motion.basis import _affine
 from velogauss_fast.quaternion import quat_multiply
+from velogauss_ref.motion.basis import COLUMN_GROUPS
 from velogauss_ref.motion.config import N_BASIS
 
 # Positions of the parts of u = [x | 1 | q] in the full generators.
@@ -76,7 +77,8 @@ def _full_generators():
     """G (12, 8, 8) in float64: G_j acting on u = [x | 1 | q], for every VG-BASIS column j."""
     eye = torch.eye(N_BASIS, dtype=torch.float64)
     A, b = _affine(eye)  # column j of Phi as the affine map x -> A(e_j) x + b(e_j)
-    pure = torch.cat([torch.zeros(N_BASIS, 1, dtype=torch.float64), 0.5 * eye[:, 3:6]], dim=1)
+    omega = eye[:, list(COLUMN_GROUPS["rotation"])]  # omega(e_j) = (w4, w5, w6) of e_j
+    pure = torch.cat([torch.zeros(N_BASIS, 1, dtype=torch.float64), 0.5 * omega], dim=1)
     # Q_j[:, k] = 1/2 (0, omega(e_j)) (x) e_k: left multiplication as a matrix.
     Q = quat_multiply(pure[:, None, :], torch.eye(4, dtype=torch.float64)[None]).transpose(1, 2)
     G = torch.zeros(N_BASIS, 8, 8, dtype=torch.float64)

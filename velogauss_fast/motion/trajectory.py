@@ -23,9 +23,9 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
     Only what cfg.mask moves is integrated (`velogauss_fast.motion.rates`): without a
     rotation column q_t is q0 normalised, without a stretch or shear column s_t is s0 itself
     (both exactly what integrating their zero rates gives), and R(q0) is built once when log s
-    moves but q does not. The time network runs once on all stage times and the active
-    coefficients of every stage come from one (N, K) @ (K, stages x active) product; m(z) is
-    computed once. t = 0 returns the canonical state (q normalised). A quaternion that stays
+    moves but q does not. m(z) is computed once, the time network runs once on all stage
+    times, and the active coefficients of every stage come from one (stages x active, K) @
+    (K, N) product. t = 0 returns the canonical state (q normalised). A quaternion that stays
     below QUAT_ZERO_NORM_SQ comes back as the identity (1, 0, 0, 0). Raises ValueError for
     bad shapes, non-finite or non-positive s0, a bad t, h or method.
     """
