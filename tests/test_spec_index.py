@@ -65,3 +65,15 @@ def test_readme_spec_table_is_current():
 
     readme = (ROOT / "README.md").read_text()
     assert readme == with_spec_table(readme, INDEX), "README spec table is stale; run `python -m tests.sync_spec_index`"
+
+
+def test_every_constant_is_named_in_the_spec():
+    """spec/conventions.md's constants table lists every constant of velogauss_ref.constants."""
+    from velogauss_ref import constants
+
+    table = (ROOT / "spec" / "conventions.md").read_text().split("## Constants", 1)[1]
+    rows = {line.split("|")[1].strip(): line for line in table.splitlines() if line.startswith("| `")}
+    names = [n for n in vars(constants) if n.isupper() and not n.startswith("_")]
+    assert names, "no constants found"
+    missing = [n for n in names if not any(f"`{n}`" in key for key in rows)]
+    assert not missing, f"constants missing from spec/conventions.md: {missing}"

@@ -22,14 +22,17 @@ spaced times in [0, 1]; those `> max_time` are the future):
   points and components (Frobenius); a time where `v_gt` is identically zero has no
   relative error (None) and is left out of the means. Also reported: the mean per-point
   error `mean_i |velocity_at(x_i, t) − v_gt(x_i, t)|` (world units per unit time).
-  Predicting zero velocity gives a relative error of exactly 1.
+  Predicting zero velocity gives a relative error of exactly 1. A model without a velocity
+  field (the "deform-only" ablation) has no velocity to score: every velocity error is None.
 - trajectories: the Gaussians whose canonical mean `μ0 = base_positions(0)` lies inside
   or within `EVAL_SURFACE_MARGIN` (world units) of a moving body at t = 0 and whose opacity
   is at least `ALPHA_MIN` (lower opacities never reach a pixel, VG-ALPHA) are followed:
   `error(t) = mean_i |base_positions(t)_i − position(μ0_i, t)|` (world units), the
   physics-only trajectory (VG-TRAJ, without the auxiliary deformation) against the true
   path of the material point at `μ0`. Reported next to it: `mean_i |position(μ0_i, t) − μ0_i|`,
-  the error a model that does not move at all would have.
+  the error a model that does not move at all would have. A model without a velocity field
+  has no physics trajectory; its rendered means (canonical plus deformation) are followed
+  instead (`VeloGaussModel.tracked_positions`).
 
 Means are taken over the observed times (`t ≤ max_time`), the future times and all times.
 """
@@ -146,6 +149,9 @@ def velocity_error(model, scene, max_time, times=MOTION_EVAL_TIMES, points=None)
     x0 = moving_surface_points(scene) if points is None else np.asarray(points, dtype=np.float64)
     rows = []
     for t in times:
+        if not model.has_velocity:
+            rows.append({"time": float(t), "relative_l2": None, "mean_abs": None})
+            continue
         x = scene.position(x0, t, margin=np.inf)
         v_gt = scene.velocity(x, t, margin=np.inf)
         v = query(model.velocity_at, t, x)
@@ -165,7 +171,7 @@ def trajectory_error(model, scene, max_time, times=MOTION_EVAL_TIMES):
     `{"gaussians": M, "per_time": [{"time", "mean_distance", "static_mean_distance"}],
     "observed"/"future"/"all": {...}}`; with no Gaussian selected the distances are None.
     """
-    mu0 = query(model.base_positions, 0.0)
+    mu0 = query(model.tracked_positions, 0.0)
     opacity = query(lambda t: model.gaussians_at(t)["opacities"], 0.0).reshape(-1)
     owner = scene.body_index(mu0, 0.0, margin=EVAL_SURFACE_MARGIN)
     keep = (owner >= 0) & (opacity >= ALPHA_MIN)
@@ -173,7 +179,7 @@ def trajectory_error(model, scene, max_time, times=MOTION_EVAL_TIMES):
     rows = []
     for t in times:
         gt = scene.position(mu0[keep], t, margin=EVAL_SURFACE_MARGIN)
-        x = query(model.base_positions, t)[keep]
+        x = query(model.tracked_positions, t)[keep]
         any_kept = bool(keep.any())
         rows.append({
             "time": float(t),
@@ -265,9 +271,11 @@ holds it still: the difference to the extrapolation row is what the learned moti
 Velocity: points sampled on the moving bodies' surfaces at t = 0 and carried along their
 true paths; at {len(MOTION_EVAL_TIMES)} evenly spaced times in [0, 1], ‖v_learned − v_true‖ / ‖v_true‖ over all points
 (a zero prediction scores 1), and the mean per-point error |v_learned − v_true|.
+Velocity errors are "—" for a model without a velocity field (deform-only).
 Trajectory: Gaussians (opacity ≥ {ALPHA_MIN:.4g}) inside or within {EVAL_SURFACE_MARGIN:g} units of a moving body at
-t = 0; mean distance between their physics base positions at t and the true positions of
-the material points they started on. See velogauss/evaluate.py for the exact definitions.
+t = 0; mean distance between their physics base positions at t (rendered positions for a
+model without a velocity field) and the true positions of the material points they started
+on. See velogauss/evaluate.py for the exact definitions.
 """
 
 

@@ -14,10 +14,11 @@ written atomically (`velogauss.io_utils`). What `render_run` writes into its out
   the centre of the scene box, perpendicular to the box's thinnest axis, at t = 0 and
   t = 1 (in-plane components as arrows, coloured by speed); on synthetic scenes the true
   field is drawn in orange where the slice cuts a body;
-- `trajectories.png`: `base_positions(t)` of up to `TRAJECTORY_GAUSSIANS` of the most
+- `trajectories.png`: `tracked_positions(t)` (physics positions, or the rendered means of
+  a model without a velocity field) of up to `TRAJECTORY_GAUSSIANS` of the most
   opaque Gaussians for t in [0, 1], projected orthographically on the same plane, solid
   while observed, dashed in the future; on synthetic scenes the true paths of the same
-  material points in grey.
+  material points in grey. A model without a velocity field gets no `velocity_field.png`.
 """
 
 import importlib.util
@@ -150,7 +151,7 @@ def velocity_field_figure(model, bounds, times=(0.0, 1.0), ground_truth=None):
     for ax, t in zip(axes[0], times):
         v = query(model.velocity_at, t, points)
         speed = np.linalg.norm(v, axis=1)
-        means = query(model.base_positions, t)
+        means = query(model.tracked_positions, t)
         near = np.abs(means[:, normal] - centre[normal]) < thickness
         ax.scatter(means[near, a], means[near, b], s=2, color="0.75", label="Gaussians near the slice")
         q = ax.quiver(points[:, a], points[:, b], v[:, a], v[:, b], speed, cmap="viridis", angles="xy")
@@ -171,14 +172,14 @@ def velocity_field_figure(model, bounds, times=(0.0, 1.0), ground_truth=None):
 
 
 def trajectories_figure(model, bounds, max_time, ground_truth=None):
-    """A figure of `base_positions(t)`, t in [0, 1], of the `TRAJECTORY_GAUSSIANS` most opaque
+    """A figure of `tracked_positions(t)`, t in [0, 1], of the `TRAJECTORY_GAUSSIANS` most opaque
     Gaussians, projected on the plane of `slice_plane(bounds)`: solid for `t ≤ max_time`,
     dashed after; `ground_truth` (an `AnalyticScene`, or None) adds the true paths in grey."""
     _, (a, b) = slice_plane(bounds)
     opacity = query(lambda t: model.gaussians_at(t)["opacities"], 0.0).reshape(-1)
     chosen = np.sort(np.argsort(-opacity, kind="stable")[:TRAJECTORY_GAUSSIANS])
     times = np.unique(np.concatenate([np.linspace(0.0, 1.0, TRAJECTORY_TIMES), [max_time]]))
-    paths = np.stack([query(model.base_positions, t)[chosen] for t in times])  # (T, M, 3)
+    paths = np.stack([query(model.tracked_positions, t)[chosen] for t in times])  # (T, M, 3)
     observed = times <= max_time
     fig, ax = plt.subplots(figsize=(6.0, 5.2))
     if ground_truth is not None:
@@ -227,11 +228,12 @@ def render_run(model, scene, out_dir, fps=8, ground_truth=None, label=True, prog
     if importlib.util.find_spec("imageio_ffmpeg") is not None:
         write_animation(out / "sequence.mp4", pictures, fps)
         written.append(out / "sequence.mp4")
-    for name, make in (
-        ("filmstrip.png", lambda: filmstrip_figure(items, gts, preds, scene.max_time)),
-        ("velocity_field.png", lambda: velocity_field_figure(model, scene.bounds, ground_truth=ground_truth)),
-        ("trajectories.png", lambda: trajectories_figure(model, scene.bounds, scene.max_time, ground_truth)),
-    ):
+    figures = [("filmstrip.png", lambda: filmstrip_figure(items, gts, preds, scene.max_time)),
+               ("trajectories.png", lambda: trajectories_figure(model, scene.bounds, scene.max_time, ground_truth))]
+    if model.has_velocity:
+        figures.append(("velocity_field.png",
+                        lambda: velocity_field_figure(model, scene.bounds, ground_truth=ground_truth)))
+    for name, make in figures:
         fig = make()
         try:
             save_figure(out / name, fig)

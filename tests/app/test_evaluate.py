@@ -112,10 +112,11 @@ def test_freeze_baseline_renders_at_max_time():
 
 
 class VelocityModel:
-    """Stand-in motion model: velocity `scale · v_true`, positions `x0 + shift(t)`."""
+    """Stand-in motion model: velocity `scale · v_true`; tracked positions `mu0`, or the
+    true paths from `mu0` with `exact_paths`; `has_velocity` False mimics deform-only."""
 
-    def __init__(self, scene, scale=1.0, mu0=None, opacity=None, exact_paths=False):
-        self.scene, self.scale = scene, scale
+    def __init__(self, scene, scale=1.0, mu0=None, opacity=None, exact_paths=False, has_velocity=True):
+        self.scene, self.scale, self.has_velocity = scene, scale, has_velocity
         self.mu0 = mu0 if mu0 is not None else np.zeros((1, 3))
         self.opacity = opacity if opacity is not None else np.ones(len(self.mu0))
         self.exact_paths = exact_paths
@@ -123,7 +124,7 @@ class VelocityModel:
     def velocity_at(self, x, t):
         return torch.as_tensor(self.scale * self.scene.velocity(x.double().numpy(), t, margin=np.inf))
 
-    def base_positions(self, t):
+    def tracked_positions(self, t):
         if self.exact_paths:
             return torch.as_tensor(self.scene.position(self.mu0, t, margin=EVAL_SURFACE_MARGIN))
         return torch.as_tensor(self.mu0)
@@ -142,6 +143,13 @@ def test_velocity_relative_error_of_scaled_fields(scale, expected):
         assert error[group]["relative_l2"] == pytest.approx(expected, abs=1e-6)
     assert [r["time"] for r in error["per_time"]] == pytest.approx(np.linspace(0, 1, 11))
     assert len([r for r in error["per_time"] if r["time"] > 0.75]) == 3  # 0.8, 0.9, 1.0
+
+
+def test_a_model_without_velocity_field_has_no_velocity_error():
+    scene = SCENES["toss"]()
+    error = evaluate.velocity_error(VelocityModel(scene, has_velocity=False), scene, max_time=0.75)
+    assert all(r["relative_l2"] is None and r["mean_abs"] is None for r in error["per_time"])
+    assert error["all"] == {"relative_l2": None, "mean_abs": None}
 
 
 def test_velocity_points_skip_static_bodies():
@@ -164,6 +172,9 @@ def test_trajectory_selection_and_errors():
     opacity = np.array([1.0, 1.0, 0.5 * ALPHA_MIN])
     exact = evaluate.trajectory_error(VelocityModel(scene, mu0=mu0, opacity=opacity, exact_paths=True), scene, 0.75)
     frozen = evaluate.trajectory_error(VelocityModel(scene, mu0=mu0, opacity=opacity), scene, 0.75)
+    deform_only = evaluate.trajectory_error(
+        VelocityModel(scene, mu0=mu0, opacity=opacity, exact_paths=True, has_velocity=False), scene, 0.75)
+    assert deform_only["all"]["mean_distance"] == pytest.approx(0.0, abs=1e-12)
     assert exact["gaussians"] == frozen["gaussians"] == 1
     assert exact["all"]["mean_distance"] == pytest.approx(0.0, abs=1e-12)
     # A model that does not move scores exactly the "nothing moved" reference distance,

@@ -3,6 +3,7 @@ detection, atomic checkpoints, exact resume and Ctrl-C."""
 
 import json
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from velogauss.train.densify import DensityStats, densify_and_prune
 from velogauss.train.optim import make_optimizer
 from velogauss.train.sampling import FrameSampler
 from velogauss.train.static import detect_moving
+from velogauss.visualize import render_run
 
 TINY = ["train.iterations=12", "train.warmup=3", "train.curriculum=4", "train.eval_every=6",
         "train.checkpoint_every=4", "densify.start=2", "densify.every=4", "densify.until=10",
@@ -147,6 +149,7 @@ def test_checkpoint_write_is_atomic(tiny_scene, tmp_path, monkeypatch):
 def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, monkeypatch):
     cfg = load_config(None, TINY)
     full = loop.train(cfg, tiny_scene, tmp_path / "full", progress=False)
+    wall = time.perf_counter()
     step = loop._Loop.step
 
     def step_then_interrupt(self, it):
@@ -167,8 +170,11 @@ def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, m
     assert a.keys() == b.keys()
     for key in a:
         assert torch.equal(a[key], b[key]), key
+    wall = time.perf_counter() - wall
     log = [json.loads(line) for line in (tmp_path / "cut" / "log.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in log] == [6, 12]
+    # Training time adds up over both sessions without counting any stretch twice.
+    assert 0 < log[0]["elapsed_s"] < log[1]["elapsed_s"] < wall
     model, saved_cfg = load_model(tmp_path / "cut")
     assert saved_cfg == cfg and load_checkpoint(tmp_path / "cut")["iteration"] == 12
 
@@ -186,3 +192,7 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
     has_velocity = ablation != "deform-only"
     assert reloaded.has_velocity == has_velocity
     assert (reloaded.motion.use_adf) == (ablation != "no-adf")
+    # Its pictures: a velocity field figure only where there is a velocity field.
+    written = {p.name for p in render_run(reloaded, tiny_scene, tmp_path / "renders")}
+    assert {"sequence.gif", "filmstrip.png", "trajectories.png"} <= written
+    assert ("velocity_field.png" in written) == has_velocity

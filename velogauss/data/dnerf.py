@@ -33,6 +33,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+from skimage.transform import downscale_local_mean
 
 from velogauss.data.cameras import Camera, check_rigid, intrinsics_from_focal, intrinsics_from_fov
 from velogauss.data.errors import DataError
@@ -365,8 +366,8 @@ def _halve(image):
     h, w = image.shape[0] // 2, image.shape[1] // 2
     if h == 0 or w == 0:
         raise DataError(None, "half_res", f"image of {image.shape[1]}x{image.shape[0]} pixels is too small to halve")
-    blocks = image[:2 * h, :2 * w].reshape(h, 2, w, 2, 3)
-    return blocks.mean(axis=(1, 3), dtype=np.float32)
+    # Area (box) averaging over 2×2 blocks; an odd last row/column is dropped, as in D-NeRF.
+    return downscale_local_mean(image[:2 * h, :2 * w], (2, 2, 1)).astype(np.float32)
 
 
 def _read_metadata(file):

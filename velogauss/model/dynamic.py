@@ -88,6 +88,13 @@ class VeloGaussModel(nn.Module):
         """Physics-only positions x*(t) (N, 3) (VG-TRAJ, without the ADF)."""
         return self.state_at(t)[3]
 
+    def tracked_positions(self, t):
+        """Positions (N, 3) whose paths the trajectory metric and figure follow: the physics
+        positions x*(t) when a velocity field moves the particles, else (deform-only, static)
+        the rendered means, the only motion such a model has."""
+        means, _, _, base = self.state_at(t)
+        return base if self.has_velocity else means
+
     def velocity_at(self, x, t):
         """Learned Eulerian velocity (M, 3) at world points x (M, 3); zero without a velocity model."""
         if not self.has_velocity:

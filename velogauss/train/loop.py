@@ -107,7 +107,8 @@ class _Loop:
         bar = tqdm(range(start, cfg.iterations), initial=start, total=cfg.iterations, disable=not progress,
                    desc="train", dynamic_ncols=True)
         psnr_ema, loss_value = None, float("nan")
-        clock = time.perf_counter()
+        # Training time of earlier sessions of this run (resume) plus this session's.
+        elapsed_before, clock = self.extra["elapsed_s"], time.perf_counter()
         with _deferred_interrupt() as interrupted:
             for it in bar:
                 loss_value, frame_psnr = self.step(it)
@@ -116,7 +117,7 @@ class _Loop:
                 self.maintain(done)
                 bar.set_postfix(loss=f"{loss_value:.4f}", psnr=f"{psnr_ema:.2f}", n=len(self.model.gaussians),
                                 refresh=False)
-                elapsed = self.extra["elapsed_s"] + time.perf_counter() - clock
+                elapsed = elapsed_before + time.perf_counter() - clock
                 if cfg.eval_every and (done % cfg.eval_every == 0 or done == cfg.iterations):
                     self.log_eval(done, loss_value, psnr_ema, elapsed)
                 last = done == cfg.iterations
