@@ -1,11 +1,9 @@
-"""Tests of velogauss/cli.py: every subcommand's help, the scene list, bad input (exit code 2
-and one line naming the thing), and one small end-to-end train → eval → render → export run."""
+"""Tests of velogauss/cli.py: every subcommand's help, the scene list, and bad input (exit
+code 2 and one line naming the thing). The train → eval → render → export path is run in
+tests/app/test_end_to_end.py."""
 
-import json
-import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 

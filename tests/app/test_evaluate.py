@@ -112,17 +112,25 @@ def test_freeze_baseline_renders_at_max_time():
 
 
 class VelocityModel:
-    """Stand-in motion model: velocity `scale · v_true`; tracked positions `mu0`, or the
-    true paths from `mu0` with `exact_paths`; `has_velocity` False mimics deform-only."""
+    """Stand-in motion model: particle velocity `scale · v_true` of the material point that
+    started at x0 (computed from x0, so a wrong start shows), Eulerian field
+    `field_scale · v_true` (default `scale`); tracked positions `mu0`, or the true paths
+    from `mu0` with `exact_paths`; `has_velocity` False mimics deform-only."""
 
-    def __init__(self, scene, scale=1.0, mu0=None, opacity=None, exact_paths=False, has_velocity=True):
+    def __init__(self, scene, scale=1.0, mu0=None, opacity=None, exact_paths=False, has_velocity=True,
+                 field_scale=None):
         self.scene, self.scale, self.has_velocity = scene, scale, has_velocity
+        self.field_scale = scale if field_scale is None else field_scale
         self.mu0 = mu0 if mu0 is not None else np.zeros((1, 3))
         self.opacity = opacity if opacity is not None else np.ones(len(self.mu0))
         self.exact_paths = exact_paths
 
     def velocity_at(self, x, t):
-        return torch.as_tensor(self.scale * self.scene.velocity(x.double().numpy(), t, margin=np.inf))
+        return torch.as_tensor(self.field_scale * self.scene.velocity(x.double().numpy(), t, margin=np.inf))
+
+    def particle_velocity(self, x0, x, t):
+        at = self.scene.position(x0.double().numpy(), t, margin=np.inf)
+        return torch.as_tensor(self.scale * self.scene.velocity(at, t, margin=np.inf))
 
     def tracked_positions(self, t):
         if self.exact_paths:
@@ -141,15 +149,23 @@ def test_velocity_relative_error_of_scaled_fields(scale, expected):
     # ‖(s − 1) v‖ / ‖v‖ = |s − 1| exactly; float32 queries: 1e-6.
     for group in ("observed", "future", "all"):
         assert error[group]["relative_l2"] == pytest.approx(expected, abs=1e-6)
+        assert error[group]["field_relative_l2"] == pytest.approx(expected, abs=1e-6)
     assert [r["time"] for r in error["per_time"]] == pytest.approx(np.linspace(0, 1, 11))
     assert len([r for r in error["per_time"] if r["time"] > 0.75]) == 3  # 0.8, 0.9, 1.0
+
+
+def test_particle_velocity_and_eulerian_field_are_scored_apart():
+    scene = SCENES["toss"]()
+    error = evaluate.velocity_error(VelocityModel(scene, scale=1.0, field_scale=0.0), scene, max_time=0.75)
+    assert error["all"]["relative_l2"] == pytest.approx(0.0, abs=1e-6)
+    assert error["all"]["field_relative_l2"] == pytest.approx(1.0, abs=1e-6)
 
 
 def test_a_model_without_velocity_field_has_no_velocity_error():
     scene = SCENES["toss"]()
     error = evaluate.velocity_error(VelocityModel(scene, has_velocity=False), scene, max_time=0.75)
     assert all(r["relative_l2"] is None and r["mean_abs"] is None for r in error["per_time"])
-    assert error["all"] == {"relative_l2": None, "mean_abs": None}
+    assert error["all"] == {"relative_l2": None, "mean_abs": None, "field_relative_l2": None}
 
 
 def test_velocity_points_skip_static_bodies():

@@ -18,8 +18,10 @@ from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, load_mo
 from velogauss.train.densify import DensityStats, densify_and_prune
 from velogauss.train.optim import make_optimizer
 from velogauss.train.sampling import FrameSampler
-from velogauss.train.static import detect_moving
+from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss.visualize import render_run
+from velogauss_fast.motion.coefficients import coefficients as velocity_coefficients
+from velogauss_fast.motion.velocity import velocity as affine_velocity
 
 TINY = ["train.iterations=12", "train.warmup=3", "train.curriculum=4", "train.eval_every=6",
         "train.checkpoint_every=4", "densify.start=2", "densify.every=4", "densify.until=10",
@@ -112,6 +114,27 @@ def test_static_detection(tiny_scene):
         model.motion.time[-1].copy_(torch.tensor([1.0] + [0.0] * 11).repeat(cfg.model.n_patterns))
     assert detect_moving(model, 0.75, 1e-4).all()
     assert model.moving.all()  # detection leaves the flags alone
+    # A per-particle threshold: those allowed more than the 0.75 they move stay static.
+    threshold = torch.full((len(model.gaussians),), 0.5)
+    threshold[::3] = 1.0
+    assert torch.equal(detect_moving(model, 0.75, threshold), threshold < 0.75)
+
+
+def test_pixel_footprint_is_depth_over_focal_in_the_closest_camera():
+    from velogauss.data import Camera
+
+    K = np.array([[100.0, 0, 16], [0, 100.0, 16], [0, 0, 1]])
+    near = np.eye(4)
+    near[2, 3] = 2.0   # world z = 0 is 2 in front of this camera
+    far = np.eye(4)
+    far[2, 3] = 5.0
+    behind = np.diag([1.0, -1.0, -1.0, 1.0])  # looks the other way: z = 0 is 0 deep, z = 1 behind it
+    cameras = [Camera(far, K, 32, 32), Camera(near, K, 32, 32), Camera(behind, K, 32, 32)]
+    points = torch.tensor([[0.0, 0.0, 0.0], [0.3, -0.2, 1.0], [0.0, 0.0, -10.0]], dtype=torch.float64)
+    size = pixel_footprint(points, cameras)
+    # depths: point 0 -> 5, 2, 0 (not in front); point 1 -> 6, 3, -1; point 2 -> -5, -8, 10.
+    assert size.tolist() == pytest.approx([2.0 / 100, 3.0 / 100, 10.0 / 100])
+    assert torch.isinf(pixel_footprint(points[2:], cameras[:2])).all()
 
 
 def test_static_particles_are_rendered_canonical(tiny_scene):
@@ -196,3 +219,20 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
     written = {p.name for p in render_run(reloaded, tiny_scene, tmp_path / "renders")}
     assert {"sequence.gif", "filmstrip.png", "trajectories.png"} <= written
     assert ("velocity_field.png" in written) == has_velocity
+
+
+def test_particle_velocity_keeps_the_start_code(tiny_scene):
+    cfg, model = _model(tiny_scene)
+    with torch.no_grad():
+        last = model.motion.time[-1]
+        last.copy_(torch.randn(last.shape, generator=torch.Generator().manual_seed(0)))
+        x0 = torch.rand(64, 3, generator=torch.Generator().manual_seed(1)) - 0.5
+        x = x0 + 0.3
+        # At its own start the particle velocity is the Eulerian field (same code) ...
+        assert torch.allclose(model.particle_velocity(x0, x0, 0.4), model.velocity_at(x0, 0.4), atol=1e-6)
+        # ... elsewhere it keeps the start's code, where the field reads the code at x.
+        moved, field = model.particle_velocity(x0, x, 0.4), model.velocity_at(x, 0.4)
+        assert (moved - field).abs().max() > 1e-3
+        z0 = model.motion.codes(x0)
+        w = velocity_coefficients(model.motion.params(), 0.4, z0, model.motion.cfg)
+        assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)

@@ -101,6 +101,14 @@ class VeloGaussModel(nn.Module):
             return torch.zeros_like(x)
         return self.motion.velocity_at(x, t)
 
+    def particle_velocity(self, x0, x, t):
+        """Velocity (M, 3) the model gives the material points that started at x0 (M, 3) when
+        they are at x (M, 3) at time t (`MotionModel.particle_velocity`); zero without a
+        velocity model."""
+        if not self.has_velocity:
+            return torch.zeros_like(x)
+        return self.motion.particle_velocity(x0, x, t)
+
     def set_moving(self, moving):
         """Flag which particles are integrated (bool (N,))."""
         self.moving = moving.to(device=self.moving.device, dtype=torch.bool)

@@ -21,7 +21,8 @@ from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.deform import adf_residual
 from velogauss_fast.motion.integrate import integrate
 from velogauss_fast.motion.trajectory import base_state
-from velogauss_fast.motion.velocity import velocity_field
+from velogauss_fast.motion.coefficients import coefficients
+from velogauss_fast.motion.velocity import velocity, velocity_field
 from velogauss_fast.nn import mlp, positional_encoding
 from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.physics.residuals import physics_residuals, transport_residual
@@ -99,6 +100,14 @@ class MotionModel(nn.Module):
         """The Eulerian velocity v(x, t) (N, 3) at world points x (N, 3) (VG-FIELD, or the MLP)."""
         if self.pds:
             return velocity_field(self.params(), x, t, self.cfg)
+        return self._mlp_velocity(x, t)
+
+    def particle_velocity(self, x0, x, t):
+        """Velocity (N, 3) of the particles that started at x0 (N, 3), when at x (N, 3) at time t:
+        Φ(x) w(t, E(γ(x0))), the code frozen at the start as along a path (VG-VEL, VG-TRAJ).
+        Without PDS the velocity MLP has no code: the Eulerian field at x."""
+        if self.pds:
+            return velocity(x, coefficients(self.params(), t, self.codes(x0), self.cfg))
         return self._mlp_velocity(x, t)
 
     def residuals(self, x, t, divergence):

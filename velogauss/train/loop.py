@@ -32,10 +32,10 @@ from velogauss.train.checkpoint import load_checkpoint, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train.sampling import FrameSampler, camera_extent, collocation_points
-from velogauss.train.static import detect_moving
+from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.losses import photometric_loss, physics_loss
 from velogauss_fast.metrics import psnr
-from velogauss_ref.constants import STATIC_DISPLACEMENT_MAX
+from velogauss_ref.constants import STATIC_MOTION_PX
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
 # a stable mean, few enough that an evaluation costs a fraction of a second.
@@ -94,6 +94,8 @@ class _Loop:
         self.rng, self.extent, self.extra, self.device = rng, extent, extra, device
         self.switches = ABLATION_SWITCHES[cfg.model.ablation]
         self.images = [torch.as_tensor(f.image, device=device) for f in data.train]
+        # The distinct training cameras (multi-view video repeats each pose at every time).
+        self.cameras = list({(f.camera.viewmat.tobytes(), f.camera.K.tobytes()): f.camera for f in data.train}.values())
         self.sampler = FrameSampler([f.time for f in data.train], cfg.train.warmup, cfg.train.curriculum,
                                     model.motion is not None)
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
@@ -192,7 +194,9 @@ class _Loop:
             self.extra["after_reset"] = True
         window_open = done >= self.cfg.train.warmup + self.cfg.train.curriculum
         if model.motion is not None and d.static_every and window_open and done % d.static_every == 0:
-            model.set_moving(detect_moving(model, self.cfg.data.max_time, STATIC_DISPLACEMENT_MAX))
+            with torch.no_grad():
+                threshold = STATIC_MOTION_PX * pixel_footprint(model.gaussians.means, self.cameras)
+            model.set_moving(detect_moving(model, self.cfg.data.max_time, threshold))
 
     def log_eval(self, done, loss_value, train_psnr, elapsed):
         """Append one evaluation record to log.jsonl."""

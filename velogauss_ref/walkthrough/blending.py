@@ -49,7 +49,7 @@ def _alpha_figure(figures):
         ax.axhline(ALPHA_MIN, color="tab:red", linestyle=":", linewidth=0.8)
         ax.set_xlabel("distance from the mean along u (px)")
     linear.set(ylabel="α", title=f"the clamp: α ≤ ALPHA_MAX = {ALPHA_MAX:g} (dashed)")
-    log.set(yscale="log", ylim=(1e-3, 2), title=f"the cut: α < ALPHA_MIN = 1/255 (dotted) is 0")
+    log.set(yscale="log", ylim=(1e-3, 2), title="the cut: α < ALPHA_MIN = 1/255 (dotted) is 0")
     linear.legend(fontsize=8)
     return save(fig, figures, "alpha-profile",
                 "splat_alpha along a line through the mean of a round footprint (σ = 2 px): an opaque splat "
