@@ -52,7 +52,7 @@ from velogauss.io_utils import to_numpy
 from velogauss.scenes.motions import StaticMotion
 from velogauss_fast import metrics
 from velogauss_ref.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN
-from velogauss_ref.lpips_nets import min_image_size
+from velogauss_ref.lpips_nets import min_image_size, weights_file
 
 IMAGE_METRICS = ("psnr", "ssim", "lpips_alex", "lpips_vgg")
 LPIPS_NETS = {"lpips_alex": "alex", "lpips_vgg": "vgg"}
@@ -111,14 +111,34 @@ def render_frames(model, frames, background, time=None, progress=False, desc="re
     return images
 
 
-def evaluate_split(model, frames, background, lpips_weights=None, progress=False, name="split"):
+def lpips_status(lpips_weights=None):
+    """`(usable, note)`: whether LPIPS can be computed, and a note for the results.
+
+    An explicit `lpips_weights` folder must hold the weights: `(True, folder)`, and a missing
+    file raises later, naming it. With None, the default places and the download are tried
+    once; where none works (no ../shared, no network), LPIPS is skipped rather than losing
+    a finished run's evaluation: `(False, "skipped: <why>")`, and the LPIPS columns read "—".
+    """
+    if lpips_weights is not None:
+        return True, str(lpips_weights)
+    try:
+        paths = [weights_file(net) for net in LPIPS_NETS.values()]
+    except FileNotFoundError as err:
+        return False, f"skipped: {err.strerror}"
+    return True, ", ".join(str(p) for p in paths)
+
+
+def evaluate_split(model, frames, background, lpips_weights=None, progress=False, name="split", with_lpips=None):
     """Render and score one split: `{"frames": [{"path", "time", psnr, ssim, lpips_*}], "mean": {...},
-    "count"}`; an empty split gives no frames and None means."""
+    "count"}`; an empty split gives no frames and None means. `with_lpips`: None decides by
+    `lpips_status(lpips_weights)`."""
+    if with_lpips is None:
+        with_lpips = lpips_status(lpips_weights)[0]
     preds = render_frames(model, frames, background, progress=progress, desc=f"render {name}")
     rows = []
     for frame, pred in tqdm(list(zip(frames, preds)), desc=f"score {name}", disable=not progress, leave=False):
         rows.append({"path": str(frame.path), "time": float(frame.time),
-                     **frame_metrics(pred, frame.image, lpips_weights)})
+                     **frame_metrics(pred, frame.image, lpips_weights, with_lpips)})
     return {"count": len(rows), "mean": mean_metrics(rows), "frames": rows}
 
 
@@ -205,17 +225,23 @@ def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth
 
     `splits`: a subset of `SPLITS`; the freeze baseline comes with "extrapolation".
     `ground_truth`: the synthetic scene's `AnalyticScene` for the motion metrics, or None.
-    Returns a JSON-ready dict: `max_time`, `splits` (per split, see `evaluate_split`),
+    Returns a JSON-ready dict: `max_time`, `lpips` (where the weights came from, or why LPIPS
+    was skipped: `lpips_status`), `splits` (per split, see `evaluate_split`),
     `freeze_baseline` (or None), `motion` (`velocity`, `trajectory`, or None).
     Raises ValueError naming `splits` for an unknown split.
     """
     unknown = [s for s in splits if s not in SPLITS]
     if unknown or not splits:
         raise ValueError(f"splits: expected a non-empty subset of {SPLITS}, got {list(splits)}")
-    result = {"max_time": float(scene.max_time), "splits": {}, "freeze_baseline": None, "motion": None}
+    with_lpips, note = lpips_status(lpips_weights)
+    if not with_lpips:
+        tqdm.write(f"LPIPS {note}")
+    result = {"max_time": float(scene.max_time), "lpips": note, "splits": {}, "freeze_baseline": None,
+              "motion": None}
     for name in splits:
         frames = getattr(scene, name)
-        result["splits"][name] = evaluate_split(model, frames, scene.background, lpips_weights, progress, name)
+        result["splits"][name] = evaluate_split(model, frames, scene.background, lpips_weights, progress, name,
+                                                with_lpips)
     if "extrapolation" in splits:
         result["freeze_baseline"] = freeze_baseline(model, scene.extrapolation, scene.background, scene.max_time,
                                                     progress)

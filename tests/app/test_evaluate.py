@@ -226,3 +226,24 @@ def test_markdown_tables():
     text = evaluate.metrics_markdown(result)
     assert "| interpolation (t ≤ 0.75) | 1 | 31.23 | 0.9500 | — | — |" in text
     assert "| val/a.png | 0.500 | 31.23 | 0.9500 | — | — |" in text
+
+
+def test_lpips_is_skipped_with_a_note_when_no_default_weights_exist(monkeypatch):
+    def nowhere(net, weights_dir=None):
+        raise FileNotFoundError(2, f"LPIPS weights {net}.npz not found and the download failed", f"{net}.npz")
+
+    monkeypatch.setattr(evaluate, "weights_file", nowhere)
+    usable, note = evaluate.lpips_status()
+    assert not usable and note.startswith("skipped: LPIPS weights alex.npz not found")
+    model = ConstantImageModel(lambda t: 0.6)
+    split = evaluate.evaluate_split(model, [_frame(0.1, 0.5)], np.ones(3), name="interpolation")
+    assert set(split["frames"][0]) == {"path", "time", "psnr", "ssim"}
+    assert split["mean"]["lpips_alex"] is None and split["mean"]["psnr"] == pytest.approx(20.0, abs=1e-3)
+
+
+def test_an_explicit_lpips_folder_must_hold_the_weights(tmp_path):
+    assert evaluate.lpips_status(tmp_path) == (True, str(tmp_path))
+    model = ConstantImageModel(lambda t: 0.6)
+    frame = _frame(0.1, 0.5)
+    with pytest.raises(FileNotFoundError, match="weights_dir: LPIPS weights"):
+        evaluate.evaluate_split(model, [frame], np.ones(3), lpips_weights=tmp_path)
