@@ -42,10 +42,11 @@ def spin_run(tmp_path_factory):
 def test_learned_velocity_matches_the_ground_truth(spin_run):
     scene, truth, model = spin_run
     err = velocity_error(model, truth, scene.max_time)
-    # A zero field scores 1.0 and a random direction about 1.4; the spin is learned to a
-    # fraction of that on the observed window and carries on past it.
-    assert err["observed"]["relative_l2"] < 0.35
-    assert err["future"]["relative_l2"] < 0.5
+    # A zero field scores 1.0 and a random direction about 1.4. Seeds 0-2 of this set-up
+    # learn the spin to 0.10-0.12 observed and 0.09-0.12 in the future; the bounds leave
+    # twice that, so a regression in the motion model or the training shows here.
+    assert err["observed"]["relative_l2"] < 0.25
+    assert err["future"]["relative_l2"] < 0.3
 
 
 def test_extrapolation_beats_holding_still(spin_run):
@@ -53,6 +54,7 @@ def test_extrapolation_beats_holding_still(spin_run):
     result = evaluate_model(model, scene, splits=("interpolation", "extrapolation"), ground_truth=truth)
     extrap = result["splits"]["extrapolation"]["mean"]["psnr"]
     frozen = result["freeze_baseline"]["mean"]["psnr"]
+    # Seeds 0-2: 4.0-5.0 dB above holding the last observed frame still.
     assert extrap > frozen + 3.0
     assert result["splits"]["interpolation"]["mean"]["psnr"] > 22.0
     traj = result["motion"]["trajectory"]
