@@ -14,6 +14,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from velogauss_ref.motion.config import MotionConfig
+
 ABLATIONS = ("full", "no-pds", "no-adf", "no-gpc", "deform-only")
 INTEGRATORS = ("euler", "rk2", "rk4")
 
@@ -39,14 +41,16 @@ class ModelConfig:
     incompressible: object = "auto"
     ablation: str = "full"  # one of ABLATIONS (the paper's PDS / ADF / GPC switches)
     sh_degree: int = 1
-    n_patterns: int = 32  # K, the paper's ablation value
-    code_dim: int = 16
-    hidden: int = 64
-    depth: int = 3
-    n_freqs_x: int = 4
-    n_freqs_t: int = 0
-    n_freqs_adf_x: int = 6
-    n_freqs_adf_t: int = 6
+    # The motion networks' sizes (velogauss_ref.motion.config.MotionConfig, whose defaults
+    # they take; K = 32 is the paper's ablation value).
+    n_patterns: int = MotionConfig.n_patterns
+    code_dim: int = MotionConfig.code_dim
+    hidden: int = MotionConfig.hidden
+    depth: int = MotionConfig.depth
+    n_freqs_x: int = MotionConfig.n_freqs_x
+    n_freqs_t: int = MotionConfig.n_freqs_t
+    n_freqs_adf_x: int = MotionConfig.n_freqs_adf_x
+    n_freqs_adf_t: int = MotionConfig.n_freqs_adf_t
     integrator: str = "rk2"  # the paper integrates with RK2
     step: float = 0.05  # largest integration step in normalised time (one frame of 21)
     # The ADF has only seen t <= max_time; beyond it, its correction is held at its value

@@ -40,7 +40,7 @@ import torch
 from matplotlib.figure import Figure
 from scipy.spatial.transform import Rotation
 
-from velogauss.bench.harness import machine, write_section
+from velogauss.bench.harness import machine, regenerate_command, write_section
 from velogauss.bench.motion import _leaves
 from velogauss.config import ModelConfig
 from velogauss.io_utils import save_figure
@@ -352,8 +352,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", quick=False, threads=Non
                         for m in ORDERS)
     toss_mask = cases()[-1].mask
     groups = " + ".join(g for g, cols in COLUMN_GROUPS.items() if all(toss_mask[c] for c in cols))
-    command = " ".join([COMMAND] + (["--quick"] if quick else []) + ([f"--device {device}"] if device != "cpu" else [])
-                       + ([f"--threads {threads}"] if threads else []))
+    command = regenerate_command(COMMAND, quick=quick, device=device, threads=threads)
     text = "\n\n".join([
         SECTION,
         f"`base_state` from t = 0 to {T_END:g} for {sizes.n_particles:,} particles per motion, every method "

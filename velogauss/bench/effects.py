@@ -31,7 +31,7 @@ import time
 import numpy as np
 import torch
 
-from velogauss.bench.harness import machine, write_section
+from velogauss.bench.harness import machine, regenerate_command, write_section
 from velogauss.config import load_config
 from velogauss.model import build_model, resolve_profile
 from velogauss.scenes import SCENES
@@ -139,7 +139,7 @@ def _write(out_path, rows, n_points, repeats, quick, threads):
         lines.append(f"| {r['config']} | {r['columns']} | {r['acc_columns']} | {'yes' if r['divergence'] else 'no'} "
                      f"| {r['moving']:,} of {r['n']:,} | {1e3 * r['motion_s']:.1f} | {1e3 * r['physics_s']:.1f} "
                      f"| {1e3 * total:.1f} | {speedup} |")
-    command = COMMAND + (" --quick" if quick else "") + (f" --threads {threads}" if threads else "")
+    command = regenerate_command(COMMAND, quick=quick, threads=threads)
     text = "\n\n".join([
         SECTION,
         f"The motion part of one training iteration on the `multi` scene ({n_points:,} Gaussians on its surfaces: "

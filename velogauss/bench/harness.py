@@ -7,6 +7,8 @@ import re
 
 import torch
 
+from velogauss.io_utils import write_text
+
 
 def status_kib(field):
     """A /proc/self/status field in KiB (VmRSS, VmHWM, ...)."""
@@ -52,6 +54,14 @@ def machine():
             f"({torch.get_num_threads()} threads), Python {platform.python_version()}")
 
 
+def regenerate_command(command, *options, quick=False, device="cpu", threads=0):
+    """The command line that regenerates a results section: `command`, the benchmark's own
+    `options` (strings), then --quick, --device and --threads where they differ from the
+    defaults."""
+    parts = [command, *options] + (["--quick"] if quick else []) + ([f"--device {device}"] if device != "cpu" else [])
+    return " ".join(parts + ([f"--threads {threads}"] if threads else []))
+
+
 def write_section(out_path, section, text):
     """Replace (or append) the `section` ("## ...") of out_path with `text`, leaving the others alone."""
     old = ""
@@ -63,6 +73,4 @@ def write_section(out_path, section, text):
     pattern = re.compile(rf"^{re.escape(section)}\n.*?(?=^## |\Z)", re.M | re.S)
     body = text.rstrip("\n") + "\n\n"
     new = pattern.sub(lambda _: body, old, count=1) if pattern.search(old) else old.rstrip("\n") + "\n\n" + body
-    os.makedirs(os.path.dirname(out_path) or ".", exist_ok=True)
-    with open(out_path, "w") as f:
-        f.write(new.rstrip("\n") + "\n")
+    write_text(out_path, new.rstrip("\n") + "\n")

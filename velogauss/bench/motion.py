@@ -37,7 +37,7 @@ import numpy as np
 import torch
 from torch.func import jacrev, vmap
 
-from velogauss.bench.harness import machine, peak_above_mib, reset_peak_memory, write_section
+from velogauss.bench.harness import machine, peak_above_mib, regenerate_command, reset_peak_memory, write_section
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
@@ -252,8 +252,7 @@ def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo
         rows.append(_fmt_row(f"residuals, {sizes.n_points:,} points, forward-mode (ours): {label}", base, base))
         rows.append(_fmt_row(f"residuals, {sizes.n_points:,} points, jacrev per point (vmapped): {label}",
                              results[f"residuals-jacrev-{kind}"], base))
-    command = " ".join([COMMAND] + (["--quick"] if quick else []) + ([f"--device {device}"] if device != "cpu" else [])
-                       + ([f"--threads {threads}"] if threads else []))
+    command = regenerate_command(COMMAND, quick=quick, device=device, threads=threads)
     text = "\n\n".join([
         SECTION,
         f"{device.upper()}, float32, `MotionConfig()` defaults, parameters "

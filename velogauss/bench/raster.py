@@ -37,7 +37,8 @@ from dataclasses import dataclass
 
 import torch
 
-from velogauss.bench.harness import machine, peak_above_mib, reset_peak_memory, status_kib, write_section
+from velogauss.bench.harness import (machine, peak_above_mib, regenerate_command, reset_peak_memory, status_kib,
+                                      write_section)
 from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 SECTION = "## Rasterizer"
@@ -296,16 +297,12 @@ def _table(results, workloads, methods):
 
 def _command(workloads, methods, device, threads):
     """The command line that regenerates a table of these workloads, methods, device and threads."""
-    parts = [COMMAND]
+    options = []
     if tuple(workloads) != DEFAULT_WORKLOADS:
-        parts.append("--workloads " + " ".join(workloads))
+        options.append("--workloads " + " ".join(workloads))
     if tuple(methods) != METHODS:
-        parts.append("--methods " + " ".join(methods))
-    if device != "cpu":
-        parts.append(f"--device {device}")
-    if threads:
-        parts.append(f"--threads {threads}")
-    return " ".join(parts)
+        options.append("--methods " + " ".join(methods))
+    return regenerate_command(COMMAND, *options, device=device, threads=threads)
 
 
 def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=METHODS, repeats=None,

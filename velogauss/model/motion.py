@@ -145,10 +145,13 @@ class MotionModel(nn.Module):
 
 def motion_config(model_cfg, profile):
     """The `MotionConfig` of a training `ModelConfig` and a scene's `MotionProfile`."""
-    return MotionConfig(n_freqs_x=model_cfg.n_freqs_x, n_freqs_t=model_cfg.n_freqs_t,
-                        n_freqs_adf_x=model_cfg.n_freqs_adf_x, n_freqs_adf_t=model_cfg.n_freqs_adf_t,
-                        code_dim=model_cfg.code_dim, n_patterns=model_cfg.n_patterns, hidden=model_cfg.hidden,
-                        depth=model_cfg.depth, mask=profile.mask, acc_mask=profile.acc_mask)
+    sizes = {name: getattr(model_cfg, name) for name in _NETWORK_SIZES}
+    return MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask)
+
+
+# The MotionConfig fields that ModelConfig carries under the same names.
+_NETWORK_SIZES = ("n_freqs_x", "n_freqs_t", "n_freqs_adf_x", "n_freqs_adf_t", "code_dim", "n_patterns", "hidden",
+                  "depth")
 
 
 def _velocity_mlp_layers(rng, cfg):
