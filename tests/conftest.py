@@ -34,20 +34,23 @@ def pytest_configure(config):
         torch.set_num_threads(1)
 
 
-def _devices():
+def pytest_generate_tests(metafunc):
+    """Parametrize `device` and `backend` arguments.
+
+    A test taking `device` runs on the CPU and, where a GPU is present, on CUDA (skipped
+    cleanly without one). A test taking `backend` as well runs once per rasterizer backend
+    of each device: "torch" (vectorised) and "numba" (compiled, CPU only) on the CPU,
+    "torch" on CUDA.
+    """
     import torch
 
-    devices = ["cpu"]
-    devices.append(
-        pytest.param("cuda", marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device"))
-    )
-    return devices
-
-
-@pytest.fixture(params=_devices())
-def device(request):
-    """Run a test on the CPU and, where a GPU is present, on CUDA."""
-    return request.param
+    cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+    if "backend" in metafunc.fixturenames:
+        metafunc.parametrize(("device", "backend"),
+                             [("cpu", "torch"), ("cpu", "numba"), pytest.param("cuda", "torch", marks=cuda)],
+                             ids=["cpu-torch", "cpu-numba", "cuda-torch"])
+    elif "device" in metafunc.fixturenames:
+        metafunc.parametrize("device", ["cpu", pytest.param("cuda", marks=cuda)])
 
 
 @pytest.fixture

@@ -23,9 +23,11 @@ def check_array(name, x, shape=None):
         raise ValueError(f"{name}: expected shape {_fmt(shape)}, got {tuple(x.shape)}")
     if not x.is_floating_point():
         raise ValueError(f"{name}: expected a floating-point tensor, got dtype {x.dtype}")
-    finite = torch.isfinite(x.detach())
-    if not bool(finite.all()):
-        bad = int(finite.numel() - finite.sum())
+    # x * 0 is 0 where x is finite and NaN where it is inf or NaN, so one product and one
+    # sum (exact: a sum of zeros) test every entry; on big inputs that is several times
+    # cheaper than isfinite().all(), whose comparisons run once per input of each call.
+    if bool(torch.isnan((x.detach() * 0).sum())):
+        bad = int((~torch.isfinite(x.detach())).sum())
         raise ValueError(f"{name}: contains {bad} non-finite value(s) (NaN or inf)")
     return x
 

@@ -3,26 +3,32 @@
 Twin of `velogauss_ref.raster` (spec/rendering.md, VG-ALPHA, VG-BLEND, VG-RENDER).
 
 `rasterize` never evaluates a Gaussian at a pixel outside its box, nor at the box pixels
-where its alpha is certainly below ALPHA_MIN. It builds the (Gaussian, pixel) pairs with
-vectorised index arithmetic (one record per Gaussian and box row, holding the row's
-interval inside the Gaussian's alpha >= ALPHA_MIN ellipse), sorts them once by (pixel,
-depth), and composites every pixel's run of the sorted table at once:
+where its alpha is certainly below ALPHA_MIN: `_row_spans` gives, per valid Gaussian in
+depth order, each box row's interval inside its alpha >= ALPHA_MIN ellipse. Two backends
+composite those pairs (a third, gsplat, lives in backends/gsplat_backend.py):
 
-* transmittance before pair i of a pixel: T_i = exp(sum_{j<i} log(1 - alpha_j)), a
-  segmented prefix sum taken as (cumulative sum over the chunk) - (its value at the
-  pixel's first pair), accumulated in float64 whatever the working dtype. The running
-  sum restarts near 0 at every pixel (each pixel's total is taken away at its last
-  pair), so the absolute error of log T is ~1e-16 per pair times the pixel's own sum
-  of |log(1 - alpha)|, however long the chunk: below 1e-9 for any run that matters (up
-  to the stop that sum is below 14; tests/fast/test_raster.py pins it against exact
-  per-pixel products on long runs, in a full-size chunk and across chunk boundaries);
-* exact early termination (VG-BLEND): pair i is blended iff alpha_i > 0 and
-  T_i (1 - alpha_i) >= TRANSMITTANCE_MIN; the prefix sum only decreases, so the first
-  pair that fails ends its pixel and every later pair of the pixel fails too;
-* an analytic backward (`_Composite`, the 3DGS one) over the saved alpha and T of each
-  pair, chunk by chunk, with the same restarting float64 sums within each pixel.
-  `_composite_autograd` is the same formulation left to autograd; tests compare the two,
-  the benchmark times both.
+* "numba" (CPU; backends/numba_backend.py): compiled kernels walk the Gaussians in depth
+  order and each one's row spans, keeping a running T per pixel; the backward walks
+  them in reverse. No pair table, no sort; float64 throughout.
+* "torch" (any device; this module): the pairs are listed with vectorised index
+  arithmetic (one record per Gaussian and box row), sorted once by (pixel, depth), and
+  every pixel's run of the sorted table is composited at once:
+
+  * transmittance before pair i of a pixel: T_i = exp(sum_{j<i} log(1 - alpha_j)), a
+    segmented prefix sum taken as (cumulative sum over the chunk) - (its value at the
+    pixel's first pair), accumulated in float64 whatever the working dtype. The running
+    sum restarts near 0 at every pixel (each pixel's total is taken away at its last
+    pair), so the absolute error of log T is ~1e-16 per pair times the pixel's own sum
+    of |log(1 - alpha)|, however long the chunk: below 1e-9 for any run that matters (up
+    to the stop that sum is below 14; tests/fast/test_raster.py pins it against exact
+    per-pixel products on long runs, in a full-size chunk and across chunk boundaries);
+  * exact early termination (VG-BLEND): pair i is blended iff alpha_i > 0 and
+    T_i (1 - alpha_i) >= TRANSMITTANCE_MIN; the prefix sum only decreases, so the first
+    pair that fails ends its pixel and every later pair of the pixel fails too;
+  * an analytic backward (`_Composite`, the 3DGS one) over the saved alpha and T of each
+    pair, chunk by chunk, with the same restarting float64 sums within each pixel.
+    `_composite_autograd` is the same formulation left to autograd; tests compare the two,
+    the benchmark times both (and numba).
 """
 
 import math
@@ -30,7 +36,7 @@ from typing import NamedTuple
 
 import torch
 
-from velogauss_fast.backends import gsplat_available
+from velogauss_fast.backends import gsplat_available, numba_available
 from velogauss_fast.checks import check_array
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
@@ -45,7 +51,7 @@ from velogauss_ref.sh import check_degree
 # 1<<20 0.37 s and 219 MiB, 1<<16 0.44 s (the loop overhead starts to show).
 _CHUNK_PAIRS = 1 << 18
 _LOG_TRANSMITTANCE_MIN = math.log(TRANSMITTANCE_MIN)
-_BACKENDS = ("auto", "torch", "gsplat")
+_BACKENDS = ("auto", "torch", "numba", "gsplat")
 
 
 def splat_alpha(pixel, mean2d, conic, opacity):
@@ -145,33 +151,110 @@ def rasterize(
                              f"got {t.dtype} on {t.device}")
 
     if backend == "auto":
-        backend = "gsplat" if gsplat_available(means.device) else "torch"
+        backend = ("gsplat" if gsplat_available(means.device)
+                   else "numba" if means.device.type == "cpu" and numba_available() else "torch")
     elif backend == "gsplat" and not gsplat_available(means.device):
         raise ValueError(f"backend: 'gsplat' needs CUDA tensors, a working CUDA device and the gsplat "
                          f"package; got tensors on {means.device}")
+    elif backend == "numba" and not (means.device.type == "cpu" and numba_available()):
+        raise ValueError(f"backend: 'numba' needs CPU tensors and the numba package; got tensors on {means.device}")
     if backend == "gsplat":
         from velogauss_fast.backends.gsplat_backend import rasterize_gsplat
 
         return rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height,
                                 background, sh_degree)
-
     return _render(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree,
-                   _Composite.apply)
+                   COMPOSITES[backend])
 
 
 def _render(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree, composite):
-    """The torch backend of `rasterize` on validated input; `composite` is `_Composite.apply`
-    or `_composite_autograd` (the benchmark times both through this one pipeline)."""
+    """`rasterize` on validated input with one of the COMPOSITES (the benchmark times each
+    through this one pipeline)."""
     proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height)
     if sh_degree is None:
         rgb = colors
     else:
         rgb = sh_to_color(colors, viewing_directions(means, viewmat), sh_degree)
-    pairs = _pair_table(proj["mean2d"], proj["conic"], opacities, proj["radius"], proj["depth"], proj["valid"],
-                        width, height)
-    image, T = composite(proj["mean2d"], proj["conic"], opacities, rgb, background, pairs)
-    meta = dict(proj, colors=rgb, n_pairs=pairs.n_box)
+    spans = _row_spans(proj["mean2d"], proj["conic"], opacities, proj["radius"], proj["depth"], proj["valid"],
+                       width, height)
+    image, T = composite(proj["mean2d"], proj["conic"], opacities, rgb, background, spans)
+    meta = dict(proj, colors=rgb, n_pairs=spans.n_box)
     return image.reshape(height, width, 3), (1 - T).reshape(height, width, 1), meta
+
+
+def _composite_torch(mean2d, conic, opacity, rgb, background, spans):
+    """Vectorised torch compositing over the sorted pair table, analytic backward (any device)."""
+    return _Composite.apply(mean2d, conic, opacity, rgb, background, _pair_table(spans))
+
+
+def _composite_numba(mean2d, conic, opacity, rgb, background, spans):
+    """Compiled Gaussian-major compositing, analytic backward (CPU; backends/numba_backend)."""
+    from velogauss_fast.backends.numba_backend import CompositeNumba
+
+    return CompositeNumba.apply(mean2d, conic, opacity, rgb, background, spans)
+
+
+def _composite_plain_autograd(mean2d, conic, opacity, rgb, background, spans):
+    """The torch backend's formulation with autograd's backward: the benchmark's baseline."""
+    return _composite_autograd(mean2d, conic, opacity, rgb, background, _pair_table(spans))
+
+
+class _Spans(NamedTuple):
+    """Per valid Gaussian, in depth order, what is needed to list and composite its pairs row by row."""
+
+    ids: torch.Tensor  # [n] int64 Gaussian index, sorted by (depth, index)
+    geom: torch.Tensor  # [n, 15] float64: the SPAN_COLUMNS below
+    width: int
+    height: int
+    n_box: int  # (valid Gaussian, pixel) pairs whose box holds the centre, pruned or not
+
+
+# Columns of _Spans.geom: the mean, conic and opacity, then the row spans: sigma <= s  <=>
+# a du^2 + 2 b dv du + c dv^2 <= 2 s, so the row at offset dv from the mean keeps du in
+# centre +- half with centre = u - (b / a) dv and half = sqrt(2 a s - det dv^2) / a
+# (det = a c - b^2); "definite" is 0 for a conic that is not numerically positive definite
+# (its rows keep the whole box); x0..y1 the box.
+SPAN_COLUMNS = ("u", "v", "a", "b", "c", "opacity", "two_as", "det", "inv_a", "b_over_a", "definite",
+                "x0", "x1", "y0", "y1")
+# Integer views whose order is that of positive floats of the same width.
+_BITS = {torch.float16: torch.int16, torch.bfloat16: torch.int16, torch.float32: torch.int32,
+         torch.float64: torch.int64}
+
+
+def _row_spans(mean2d, conic, opacity, radius, depth, valid, width, height):
+    """The row-span parameters of every valid Gaussian, in depth order (see `_Spans`).
+
+    A pair of VG-RENDER is a valid Gaussian and a pixel centre inside its box. Pairs with
+    alpha < ALPHA_MIN are skipped by VG-ALPHA and change nothing (not even T), so only the
+    pixels of each box row where sigma <= log(opacity / ALPHA_MIN) + margin are listed:
+    an interval of the row (the conic's ellipse), computed per (Gaussian, row) in float64
+    by `_pair_table` here and by the numba kernels' `row_span`, with the same operations.
+    The margin (`_span_margin`) exceeds the rounding of sigma in the working dtype, so
+    every dropped pair has a computed alpha < ALPHA_MIN; kept pairs may still be skipped.
+    Ties in depth keep index order (stable sort).
+    """
+    with torch.no_grad():
+        f64 = torch.float64
+        ids = torch.nonzero(valid).squeeze(1)
+        # Valid depths are >= NEAR_PLANE > 0, and positive floats order as their bit
+        # patterns: a stable (radix) sort of the integer view is the stable depth order,
+        # ~10x faster on the CPU than sorting the floats.
+        d = depth.index_select(0, ids)
+        ids = ids.index_select(0, torch.sort(d.view(_BITS[d.dtype]), stable=True).indices)
+        # One gather of the per-Gaussian inputs, then contiguous columns.
+        cols = torch.cat([mean2d, conic, opacity[:, None], radius[:, None].to(mean2d.dtype)], dim=1)
+        u, v, a, b, c, o, r = cols.index_select(0, ids).T.contiguous()
+        x0, x1 = _centre_span(u - r, u + r, width)
+        y0, y1 = _centre_span(v - r, v + r, height)
+        n_box = int(((x1 - x0 + 1).clamp(min=0) * (y1 - y0 + 1).clamp(min=0)).sum())
+        u, v, a, b, c, o, r = (t.to(f64) for t in (u, v, a, b, c, o, r))
+        s = torch.log(o / ALPHA_MIN) + _span_margin(a, b, c, r, mean2d.dtype)
+        det = a * c - b * b
+        definite = (a > 0) & (det > 0)
+        a_safe = torch.where(definite, a, torch.ones_like(a))
+        geom = torch.stack([u, v, a, b, c, o, 2 * a * s, det, 1 / a_safe, b / a_safe, definite.to(f64),
+                            x0.to(f64), x1.to(f64), y0.to(f64), y1.to(f64)], dim=1)
+    return _Spans(ids, geom, width, height, n_box)
 
 
 class _Pairs(NamedTuple):
@@ -182,41 +265,21 @@ class _Pairs(NamedTuple):
     offsets: torch.Tensor  # [P + 1] int64: the pairs of pixel p are offsets[p]:offsets[p+1]
     width: int
     height: int
-    n_box: int  # (valid Gaussian, pixel) pairs whose box holds the centre, pruned or not
+    n_box: int  # as in _Spans
 
 
-def _pair_table(mean2d, conic, opacity, radius, depth, valid, width, height):
-    """The (Gaussian, pixel) pairs that can have alpha >= ALPHA_MIN, sorted by (pixel, depth).
+def _pair_table(spans):
+    """The (Gaussian, pixel) pairs of `spans` (see `_row_spans`), sorted by (pixel, depth).
 
-    A pair of VG-RENDER is a valid Gaussian and a pixel centre inside its box. Pairs with
-    alpha < ALPHA_MIN are skipped by VG-ALPHA and change nothing (not even T), so only the
-    pixels of each box row where sigma <= log(opacity / ALPHA_MIN) + margin are kept: an
-    interval of the row (the conic's ellipse), computed per (Gaussian, row) in float64.
-    The margin (`_span_margin`) exceeds the rounding of sigma in the working dtype, so
-    every dropped pair has a computed alpha < ALPHA_MIN; kept pairs may still be skipped.
-    Pairs are generated Gaussian by Gaussian in depth order (stable: ties keep index
-    order), so one stable sort on the int32 pixel index yields (pixel, depth) order.
+    Pairs are generated Gaussian by Gaussian in depth order, so one stable sort on the
+    int32 pixel index yields (pixel, depth) order.
     """
     with torch.no_grad():
-        device, n_pix, f64 = mean2d.device, width * height, torch.float64
-        ids = torch.nonzero(valid).squeeze(1)
-        ids = ids.index_select(0, torch.argsort(depth.index_select(0, ids), stable=True))
-        r = radius.index_select(0, ids).to(mean2d.dtype)
-        u, v = mean2d.index_select(0, ids).unbind(1)
-        x0, x1 = _centre_span(u - r, u + r, width)
-        y0, y1 = _centre_span(v - r, v + r, height)
-        ny = (y1 - y0 + 1).clamp(min=0)
-        n_box = int(((x1 - x0 + 1).clamp(min=0) * ny).sum())
-
-        # Per Gaussian, in float64: sigma(du, dv) <= s  <=>  a du^2 + 2 b dv du + c dv^2 <= 2 s.
-        a, b, c = conic.index_select(0, ids).to(f64).unbind(1)
-        s = torch.log(opacity.index_select(0, ids).to(f64) / ALPHA_MIN)
-        s = s + _span_margin(a, b, c, r.to(f64), mean2d.dtype)
-        det = a * c - b * b
-        definite = (a > 0) & (det > 0)
-        a_safe = torch.where(definite, a, torch.ones_like(a))
-        per_gaussian = torch.stack([u.to(f64), v.to(f64), 2 * a * s, det, 1 / a_safe, b / a_safe,
-                                    definite.to(f64), y0.to(f64), x0.to(f64), x1.to(f64)])
+        device, n_pix, width = spans.geom.device, spans.width * spans.height, spans.width
+        ids = spans.ids
+        u, v, _, _, _, _, two_as, det, inv_a, b_over_a, definite, x0, x1, y0, y1 = spans.geom.unbind(1)
+        ny = (y1 - y0 + 1).clamp(min=0).to(torch.int64)
+        per_gaussian = torch.stack([u, v, two_as, det, inv_a, b_over_a, definite, y0, x0, x1])
 
         # One record per (Gaussian, box row).
         n_rec = int(ny.sum())
@@ -250,7 +313,7 @@ def _pair_table(mean2d, conic, opacity, radius, depth, valid, width, height):
         del order
         offsets = torch.zeros(n_pix + 1, dtype=torch.int64, device=device)
         torch.cumsum(torch.bincount(pix, minlength=n_pix), 0, out=offsets[1:])
-    return _Pairs(gid, pix, offsets, width, height, n_box)
+    return _Pairs(gid, pix, offsets, spans.width, spans.height, spans.n_box)
 
 
 # Slack (in units of sigma) added to the pruning bound log(opacity / ALPHA_MIN): far above
@@ -479,3 +542,7 @@ def _composite_autograd(mean2d, conic, opacity, rgb, background, pairs):
     log_t = torch.zeros(n_pix, dtype=torch.float64, device=cols.device).index_add(0, pairs.pix, logt)
     T_final = torch.exp(log_t).to(cols.dtype)
     return image + T_final[:, None] * background, T_final
+
+
+# The compositing of each torch-side backend of `rasterize`.
+COMPOSITES = {"torch": _composite_torch, "numba": _composite_numba}

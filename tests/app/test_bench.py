@@ -44,16 +44,20 @@ def test_raster_bench_quick(tmp_path, one_thread):
     assert text.count("## Rasterizer") == 1 and "stale" not in text
     assert section(text, "Other").strip() == "keep me"
     body = section(text, "Rasterizer")
-    assert "Regenerate: `python -m velogauss.bench.raster --workloads quick --threads 1`" in body
+    assert "Regenerate: `python -m velogauss.bench.raster --workloads quick --rounds 1 --threads 1`" in body
     header, rows = table(body)
-    assert header == ["workload", "method", "median fwd+bwd (s)", "time / fast", "peak RSS (MiB)",
-                      "peak above start (MiB)", "memory / fast", "image sum", "note"]
+    assert header == ["workload", "method", "median fwd+bwd (s)", "time / default", "peak RSS (MiB)",
+                      "peak above start (MiB)", "memory / default", "image sum", "note"]
     assert [row[1] for row in rows] == list(raster.METHODS)
+    # gsplat needs CUDA: its row says why it was skipped; every other method ran.
+    skipped = [row for row in rows if row[2] == "-"]
+    assert [row[1] for row in skipped] == ["gsplat"] and skipped[0][-1] == "needs CUDA and the gsplat package"
+    rows = [row for row in rows if row[2] != "-"]
     for row in rows:
-        assert row[0] == "quick 12x12, 24 G" and row[-1] == "1 runs, 1 threads", row
+        assert row[0] == "quick 12x12, 24 G" and row[-1] == "1 runs in 1 rounds, 1 threads", row
         # Times print with 3 decimals: a sub-millisecond pass reads 0.000.
         assert float(row[2]) >= 0 and float(row[4]) > 0 and row[3].endswith("x") and row[6].endswith("x")
-    # Every method renders the same image: float32 (fast, autograd, dense) against the
+    # Every method renders the same image: float32 (numba, torch, autograd, dense) against the
     # float64 reference, 144 pixels of O(1) values: sums agree to ~1e-5 relative.
     sums = [float(row[7]) for row in rows]
     assert max(sums) - min(sums) <= 1e-4 * max(sums), sums

@@ -118,7 +118,13 @@ def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, gr
 
 
 def check_float32(ref_fn, fast_fn, args, device, rtol=RTOL32, floor=0.0):
-    """Fast in float32 vs the reference in float64 (outputs only; floor as in check_agreement)."""
+    """Fast in float32 vs the reference in float64 (outputs only; floor as in check_agreement).
+
+    The floor is at least float32's smallest normal number over rtol: values below it are
+    zero or denormal in float32 (a scale of 1e-89 squares to 0), so only an absolute error
+    of that size is asked of them.
+    """
+    floor = max(floor, float(np.finfo(np.float32).tiny) / rtol)
     t_args = [to_torch(a, torch.float32, device) if isinstance(a, np.ndarray) else a for a in args]
     out_f, out_r = _tuple(fast_fn(*t_args)), _tuple(ref_fn(*args))
     for k, (f, r) in enumerate(zip(out_f, out_r)):
@@ -288,11 +294,11 @@ def boundary_band(scene, delta):
 RENDER_GRAD_KEYS = (*SCENE_KEYS, "background")
 
 
-def render_gradients(scene, cot_image, cot_alpha, device=None):
+def render_gradients(scene, cot_image, cot_alpha, device=None, backend="auto"):
     """Gradients of <image, cot_image> + <alpha, cot_alpha> w.r.t. RENDER_GRAD_KEYS of `scene`.
 
     device None: the reference's autograd through its per-pixel loop; else the fast path's
-    torch autograd, float64 on `device`. Returns a dict of NumPy arrays.
+    torch autograd through `backend`, float64 on `device`. Returns a dict of NumPy arrays.
     """
     static = {k: v for k, v in scene.items() if k not in RENDER_GRAD_KEYS}
     if device is None:
@@ -304,7 +310,7 @@ def render_gradients(scene, cot_image, cot_alpha, device=None):
         return dict(zip(RENDER_GRAD_KEYS, vjp((cot_image, cot_alpha))))
     leaves = {k: to_torch(scene[k], device=device, requires_grad=True) for k in RENDER_GRAD_KEYS}
     static = {k: to_torch(v, device=device) if isinstance(v, np.ndarray) else v for k, v in static.items()}
-    image, alpha, _ = fast_rasterize(**static, **leaves)
+    image, alpha, _ = fast_rasterize(**static, **leaves, backend=backend)
     total = (image * to_torch(cot_image, device=device)).sum() + (alpha * to_torch(cot_alpha, device=device)).sum()
     grads = torch.autograd.grad(total, list(leaves.values()), allow_unused=True)
     return {k: np.zeros(np.shape(scene[k])) if g is None else to_numpy(g) for k, g in zip(RENDER_GRAD_KEYS, grads)}

@@ -52,15 +52,16 @@ def concat(a, b):
     return {k: np.concatenate([a[k], b[k]]) if k in GRAD_KEYS[:5] else a[k] for k in a}
 
 
-def render_checked(s, dtype, device):
-    """Render `s` in `dtype` on `device`; assert outputs, meta and gradients are finite.
+def render_checked(s, dtype, device, backend):
+    """Render `s` in `dtype` on `device` with `backend`; assert outputs, meta and gradients are finite.
 
     Returns (image, alpha, meta, grads), grads the gradients of a fixed random cotangent
     w.r.t. GRAD_KEYS as a dict of tensors.
     """
     leaves = {k: to_torch(s[k], dtype, device, requires_grad=True) for k in GRAD_KEYS}
     image, alpha, meta = rasterize(**leaves, viewmat=to_torch(s["viewmat"], dtype, device),
-                                   K=to_torch(s["K"], dtype, device), width=s["width"], height=s["height"])
+                                   K=to_torch(s["K"], dtype, device), width=s["width"], height=s["height"],
+                                   backend=backend)
     assert image.dtype == alpha.dtype == dtype
     assert torch.isfinite(image).all() and torch.isfinite(alpha).all()
     for key in FLOAT_META:
@@ -74,8 +75,8 @@ def render_checked(s, dtype, device):
     return image.detach(), alpha.detach(), meta, dict(zip(GRAD_KEYS, grads))
 
 
-def render_plain(s, dtype, device):
-    image, alpha, _ = rasterize(**scene_to_torch(s, dtype, device))
+def render_plain(s, dtype, device, backend):
+    image, alpha, _ = rasterize(**scene_to_torch(s, dtype, device), backend=backend)
     return image, alpha
 
 
@@ -102,20 +103,20 @@ HARD_CASES = {
 @pytest.mark.spec("VG-QUAT", "VG-COV", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("magnitude", [0.0, 1e-40], ids=["zero", "denormal"])
-def test_zero_and_denormal_quaternions_render_as_the_identity(device, dtype, magnitude):
+def test_zero_and_denormal_quaternions_render_as_the_identity(device, backend, dtype, magnitude):
     # 1e-40 is denormal in float32, where its square underflows to 0; in float64
     # |q|^2 = 4e-80 is far below QUAT_ZERO_NORM_SQ. Both mean "no rotation".
     s = dict(HARD_CASES["zero_quaternion"], quats=np.full((2, 4), magnitude))
-    image, _, _, grads = render_checked(s, dtype, device)
-    identity, _ = render_plain(dict(s, quats=np.tile([1.0, 0.0, 0.0, 0.0], (2, 1))), dtype, device)
+    image, _, _, grads = render_checked(s, dtype, device, backend)
+    identity, _ = render_plain(dict(s, quats=np.tile([1.0, 0.0, 0.0, 0.0], (2, 1))), dtype, device, backend)
     assert torch.equal(image, identity)
     assert torch.equal(grads["quats"], torch.zeros_like(grads["quats"]))
 
 
 @pytest.mark.spec("VG-COV", "VG-PROJ", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_scale_1e_minus_8_renders_the_dilated_splat(device, dtype):
-    _, alpha, meta, _ = render_checked(HARD_CASES["scale_1e-8"], dtype, device)
+def test_scale_1e_minus_8_renders_the_dilated_splat(device, backend, dtype):
+    _, alpha, meta, _ = render_checked(HARD_CASES["scale_1e-8"], dtype, device, backend)
     # (f s / z)^2 = 2.5e-15 px^2: the splat is the EPS2D dilation alone, centred on (4, 4).
     np.testing.assert_allclose(to_numpy(meta["cov2d"][0]), EPS2D * np.eye(2), atol=ATOL[dtype])
     np.testing.assert_allclose(to_numpy(alpha[4, 4, 0]), 0.9, atol=ATOL[dtype])
@@ -126,8 +127,8 @@ def test_scale_1e_minus_8_renders_the_dilated_splat(device, dtype):
 
 @pytest.mark.spec("VG-COV", "VG-PROJ", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_scale_1e4_covers_the_image_with_its_opacity(device, dtype):
-    _, alpha, meta, _ = render_checked(HARD_CASES["scale_1e4"], dtype, device)
+def test_scale_1e4_covers_the_image_with_its_opacity(device, backend, dtype):
+    _, alpha, meta, _ = render_checked(HARD_CASES["scale_1e4"], dtype, device, backend)
     assert meta["valid"].tolist() == [True] and meta["radius"][0] > 1e5
     # sigma at any pixel is ~1e-9: alpha is the opacity everywhere.
     np.testing.assert_allclose(to_numpy(alpha), 0.6, atol=1e-6)
@@ -136,20 +137,20 @@ def test_scale_1e4_covers_the_image_with_its_opacity(device, dtype):
 @pytest.mark.spec("VG-PROJ", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("case", ["behind_camera", "on_camera_plane", "straddling_near_plane"])
-def test_gaussian_in_front_of_the_near_plane_contributes_nothing(device, dtype, case):
+def test_gaussian_in_front_of_the_near_plane_contributes_nothing(device, backend, dtype, case):
     # The second Gaussian's centre is behind the near plane (the straddling one by 1 mm,
     # though 1 unit wide): culled, so the image is the first's alone, and nothing flows back.
-    image, _, meta, grads = render_checked(HARD_CASES[case], dtype, device)
+    image, _, meta, grads = render_checked(HARD_CASES[case], dtype, device, backend)
     assert meta["valid"].tolist() == [True, False]
-    assert torch.equal(image, render_plain(VISIBLE, dtype, device)[0])
+    assert torch.equal(image, render_plain(VISIBLE, dtype, device, backend)[0])
     for key in GRAD_KEYS[:5]:
         assert torch.equal(grads[key][1], torch.zeros_like(grads[key][1])), key
 
 
 @pytest.mark.spec("VG-PROJ", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_gaussian_just_beyond_the_near_plane_is_kept(device, dtype):
-    _, alpha, meta, _ = render_checked(HARD_CASES["just_beyond_near_plane"], dtype, device)
+def test_gaussian_just_beyond_the_near_plane_is_kept(device, backend, dtype):
+    _, alpha, meta, _ = render_checked(HARD_CASES["just_beyond_near_plane"], dtype, device, backend)
     assert meta["valid"].tolist() == [True]
     # cov2d ~ (f s / z)^2 ~ 8e3 px^2, so sigma <= 0.5 * 32 / 8e3 at the corners.
     np.testing.assert_allclose(to_numpy(alpha), 0.5, atol=1e-3)
@@ -157,10 +158,10 @@ def test_gaussian_just_beyond_the_near_plane_is_kept(device, dtype):
 
 @pytest.mark.spec("VG-PROJ", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_edge_on_disc_has_a_regular_conic(device, dtype):
+def test_edge_on_disc_has_a_regular_conic(device, backend, dtype):
     # Thickness 1e-8, tilted 30 degrees about the optical axis: J W Sigma W^T J^T is a
     # rank-1 line (det ~ 1e-15 before dilation); the dilation keeps the conic regular.
-    _, alpha, meta, _ = render_checked(HARD_CASES["edge_on_disc"], dtype, device)
+    _, alpha, meta, _ = render_checked(HARD_CASES["edge_on_disc"], dtype, device, backend)
     major = np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
     expected = (10.0 * 0.5 / 2.0) ** 2 * np.outer(major, major) + EPS2D * np.eye(2)
     cov = to_numpy(meta["cov2d"][0])
@@ -173,19 +174,20 @@ def test_edge_on_disc_has_a_regular_conic(device, dtype):
 
 @pytest.mark.spec("VG-BLEND", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_64_stacked_opaque_gaussians_stop_the_pixel(device, dtype):
+def test_64_stacked_opaque_gaussians_stop_the_pixel(device, backend, dtype):
     s = HARD_CASES["64_stacked_opaque"]
-    image, alpha, meta, _ = render_checked(s, dtype, device)
+    image, alpha, meta, _ = render_checked(s, dtype, device, backend)
     assert meta["valid"].all()
     # Nowhere is T below TRANSMITTANCE_MIN (up to the rounding of 1 - alpha).
     assert (1 - alpha).min() >= TRANSMITTANCE_MIN * (1 - 1e-3)
     # The centre pixel is stopped by the first two (alpha = ALPHA_MAX each):
     # (1 - 0.99)^2 is 1.0000000000000018e-4 >= TRANSMITTANCE_MIN in float64, so the second
-    # is blended; in float32 it is 9.99998e-5 < TRANSMITTANCE_MIN, so it is not. Either
-    # way the nearest colour dominates and nothing behind the second contributes.
+    # is blended; in float32 it is 9.99998e-5 < TRANSMITTANCE_MIN, so it is not (numba
+    # composites in float64 whatever the dtype: blended). Either way the nearest colour
+    # dominates and nothing behind the second contributes.
     front, second = s["colors"][0], s["colors"][1]
     t1 = 1 - ALPHA_MAX
-    if dtype == torch.float64:
+    if dtype == torch.float64 or backend == "numba":
         expected = ALPHA_MAX * front + t1 * ALPHA_MAX * second + t1 * t1 * BACKGROUND
     else:
         expected = ALPHA_MAX * front + t1 * BACKGROUND
@@ -195,34 +197,34 @@ def test_64_stacked_opaque_gaussians_stop_the_pixel(device, dtype):
 @pytest.mark.spec("VG-BLEND", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("case", ["64_stacked_opaque", "scale_1e4", "edge_on_disc"])
-def test_weights_and_final_transmittance_sum_to_one(device, dtype, case):
+def test_weights_and_final_transmittance_sum_to_one(device, backend, dtype, case):
     # White splats over white: every pixel is sum_i w_i + T = 1, stopped early or not.
     s = dict(HARD_CASES[case], background=np.ones(3))
     s["colors"] = np.ones_like(s["colors"])
-    image, _ = render_plain(s, dtype, device)
+    image, _ = render_plain(s, dtype, device, backend)
     np.testing.assert_allclose(to_numpy(image), 1.0, rtol=0, atol=10 * ATOL[dtype])
 
 
 @pytest.mark.spec("VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_empty_scene_renders_the_background(device, dtype):
+def test_empty_scene_renders_the_background(device, backend, dtype):
     s = scene(np.zeros((0, 3)))
-    image, alpha, meta, grads = render_checked(s, dtype, device)
+    image, alpha, meta, grads = render_checked(s, dtype, device, backend)
     assert torch.equal(image, to_torch(BACKGROUND, dtype, device).expand(HEIGHT, WIDTH, 3))
     assert torch.equal(alpha, torch.zeros_like(alpha))
     assert meta["mean2d"].shape == (0, 2) and meta["valid"].shape == (0,) and meta["n_pairs"] == 0
     # image = background at every pixel: d/d background is the cotangent's sum.
     cot = np.random.default_rng(0).standard_normal((HEIGHT, WIDTH, 3))
     np.testing.assert_allclose(to_numpy(grads["background"]), cot.sum((0, 1)), rtol=1e-5)
-    black, _ = render_plain({k: v for k, v in s.items() if k != "background"}, dtype, device)
+    black, _ = render_plain({k: v for k, v in s.items() if k != "background"}, dtype, device, backend)
     assert torch.equal(black, torch.zeros_like(black))
 
 
 @pytest.mark.spec("VG-PROJ", "VG-RENDER")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_every_gaussian_off_screen_renders_the_background(device, dtype):
+def test_every_gaussian_off_screen_renders_the_background(device, backend, dtype):
     # Left of, right of, above, below the image, and far beyond the Jacobian clamp.
-    image, alpha, meta, grads = render_checked(HARD_CASES["every_gaussian_off_screen"], dtype, device)
+    image, alpha, meta, grads = render_checked(HARD_CASES["every_gaussian_off_screen"], dtype, device, backend)
     assert not meta["valid"].any()
     assert torch.equal(image, to_torch(BACKGROUND, dtype, device).expand(HEIGHT, WIDTH, 3))
     assert torch.equal(alpha, torch.zeros_like(alpha))
@@ -232,19 +234,19 @@ def test_every_gaussian_off_screen_renders_the_background(device, dtype):
 
 @pytest.mark.spec("VG-RENDER")
 @pytest.mark.parametrize("case", list(HARD_CASES))
-def test_hard_case_reference_vs_fast(device, case):
+def test_hard_case_reference_vs_fast(device, backend, case):
     s = HARD_CASES[case]
     # The stacked case's centre pixel sits 2e-14 above the stop: banded, pinned above.
     keep = ~boundary_band(s, 1e-9)
     image_ref, alpha_ref, _ = ref.rasterize(**s)
-    image, alpha = render_plain(s, torch.float64, device)
+    image, alpha = render_plain(s, torch.float64, device, backend)
     assert_close(image, image_ref, RTOL64, mask=keep)
     assert_close(alpha, alpha_ref, RTOL64, mask=keep)
     rng = np.random.default_rng(1)
     cot_image = rng.standard_normal(image_ref.shape) * keep[..., None]
     cot_alpha = rng.standard_normal(alpha_ref.shape) * keep[..., None]
     g_ref = render_gradients(s, cot_image, cot_alpha)
-    g_fast = render_gradients(s, cot_image, cot_alpha, device)
+    g_fast = render_gradients(s, cot_image, cot_alpha, device, backend)
     for key, g in g_ref.items():
         assert_close(g_fast[key], g, RTOL64, name=f"gradient of {key}", floor=1.0)
 

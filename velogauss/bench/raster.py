@@ -2,16 +2,22 @@
 
 Methods, all on the same random scenes (float32, CPU unless --device says otherwise):
 
-* fast      -- velogauss_fast.raster.rasterize (sorted pair table, analytic backward);
-* autograd  -- the same projection, pair table and compositing formulation left to
-               autograd (velogauss_fast.raster._composite_autograd);
+* numba     -- velogauss_fast.raster.rasterize(backend="numba"): compiled Gaussian-major
+               compositing, analytic backward, nothing stored per pair (CPU only);
+* torch     -- rasterize(backend="torch"): vectorised compositing over the sorted pair
+               table, analytic backward (any device);
+* gsplat    -- rasterize(backend="gsplat"): gsplat's CUDA kernels (CUDA with gsplat only);
+* autograd  -- the torch backend's projection, pair table and compositing left to
+               autograd (velogauss_fast.raster._composite_plain_autograd): what the
+               formulation costs without a hand-written backward;
 * dense     -- a straightforward all-pairs renderer: every Gaussian at every pixel as
                dense (P, N) tensors, the approach of simple pure-torch splatting code
                (same VG-ALPHA/VG-BLEND semantics, box test included);
 * reference -- velogauss_ref.raster.rasterize with autograd gradients (NumPy, per-pixel
                loop), on the smallest workload only.
 
-Each (method, workload) runs in a fresh subprocess: one warm-up pass, then the memory
+Each workload is measured in rounds; a round runs every method once, in turn, each in a
+fresh subprocess (dense and reference in the first round only): one warm-up pass, then the memory
 the allocator caches is returned to the system (malloc_trim), the peak resident set size
 is reset (/proc/self/clear_refs) and `repeats` timed passes follow; memory is the
 high-water mark VmHWM minus the resident size at the reset (the scene, the interpreter
@@ -62,7 +68,7 @@ WORKLOADS = {
     "quick": Workload("quick", 12, 12, 24),
 }
 DEFAULT_WORKLOADS = ("W1", "W2", "W3", "W4")
-METHODS = ("fast", "autograd", "dense", "reference")
+METHODS = ("numba", "torch", "gsplat", "autograd", "dense", "reference")
 # The per-pixel NumPy reference is far too slow beyond the smallest workload.
 REFERENCE_WORKLOADS = ("W1", "quick")
 # Peak bytes per (pixel, Gaussian) element of the dense renderer's forward + backward
@@ -143,15 +149,15 @@ def dense_rasterize(means, quats, scales, opacities, colors, viewmat, K, width, 
 
 def _renderer(method):
     """The function (scene tensors...) -> (image, alpha) that `method` times."""
-    if method == "fast":
+    if method in ("numba", "torch", "gsplat"):
         from velogauss_fast.raster import rasterize
 
-        return lambda **s: rasterize(**s, backend="torch")[:2]
+        return lambda **s: rasterize(**s, backend=method)[:2]
     if method == "autograd":
-        from velogauss_fast.raster import _composite_autograd, _render
+        from velogauss_fast.raster import _composite_plain_autograd, _render
 
         return lambda **s: _render(**s, background=s["means"].new_zeros(3), sh_degree=None,
-                                   composite=_composite_autograd)[:2]
+                                   composite=_composite_plain_autograd)[:2]
     if method == "dense":
         return lambda **s: dense_rasterize(**s)[:2]
     if method == "reference":
@@ -241,8 +247,23 @@ def _worker(method, workload, repeats, device, threads=0):
     }
 
 
-def _skip_reason(method, workload, memory_limit_gib):
+def default_method(device):
+    """The method `rasterize(backend="auto")` amounts to on `device`; ratios are taken to it."""
+    from velogauss_fast.backends import gsplat_available
+
+    if torch.device(device).type == "cpu":
+        return "numba"
+    return "gsplat" if gsplat_available(device) else "torch"
+
+
+def _skip_reason(method, workload, memory_limit_gib, device="cpu"):
+    from velogauss_fast.backends import gsplat_available
+
     wl = WORKLOADS[workload]
+    if method == "numba" and torch.device(device).type != "cpu":
+        return "CPU only"
+    if method == "gsplat" and not gsplat_available(device):
+        return "needs CUDA and the gsplat package"
     if method == "reference" and workload not in REFERENCE_WORKLOADS:
         return "reference timed on W1 only (per-pixel Python loop)"
     if method == "dense":
@@ -265,16 +286,17 @@ def _measure(method, workload, repeats, device, threads=0, in_process=False):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def _table(results, workloads, methods):
+def _table(results, workloads, methods, device="cpu"):
     by = {(r["method"], r["workload"]): r for r in results}
+    default = default_method(device)
     lines = [
-        "| workload | method | median fwd+bwd (s) | time / fast | peak RSS (MiB) | peak above start (MiB) "
-        "| memory / fast | image sum | note |",
+        "| workload | method | median fwd+bwd (s) | time / default | peak RSS (MiB) | peak above start (MiB) "
+        "| memory / default | image sum | note |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for w in workloads:
         wl = WORKLOADS[w]
-        fast = by.get(("fast", w))
+        base = by.get((default, w))
         for m in methods:
             r = by.get((m, w))
             label = f"{w} {wl.width}x{wl.height}, {wl.n_gaussians:,} G"
@@ -284,10 +306,10 @@ def _table(results, workloads, methods):
                 lines.append(f"| {label} | {m} | - | - | - | - | - | - | {r['skipped']} |")
                 continue
             ratio_t = ratio_m = "-"
-            if fast is not None and "skipped" not in fast:
-                ratio_t = f"{r['median_s'] / fast['median_s']:.1f}x"
-                ratio_m = f"{r['peak_above_start_mib'] / max(fast['peak_above_start_mib'], 1e-9):.1f}x"
-            note = f"{len(r['times'])} runs, {r['threads']} threads"
+            if base is not None and "skipped" not in base:
+                ratio_t = f"{r['median_s'] / base['median_s']:.1f}x"
+                ratio_m = f"{r['peak_above_start_mib'] / max(base['peak_above_start_mib'], 1e-9):.1f}x"
+            note = f"{len(r['times'])} runs in {r['rounds']} rounds, {r['threads']} threads"
             lines.append(
                 f"| {label} | {m} | {r['median_s']:.3f} | {ratio_t} | {r['peak_rss_mib']:.0f} | "
                 f"{r['peak_above_start_mib']:.0f} | {ratio_m} | {r['checksum']:.4f} | {note} |"
@@ -295,26 +317,55 @@ def _table(results, workloads, methods):
     return "\n".join(lines)
 
 
-def _command(workloads, methods, device, threads):
-    """The command line that regenerates a table of these workloads, methods, device and threads."""
+def _command(workloads, methods, device, threads, rounds=3):
+    """The command line that regenerates a table of these workloads, methods, device, threads and rounds."""
     options = []
     if tuple(workloads) != DEFAULT_WORKLOADS:
         options.append("--workloads " + " ".join(workloads))
     if tuple(methods) != METHODS:
         options.append("--methods " + " ".join(methods))
+    if rounds != 3:
+        options.append(f"--rounds {rounds}")
     return regenerate_command(COMMAND, *options, device=device, threads=threads)
 
 
+# Methods too slow to repeat: measured in the first round only.
+SINGLE_ROUND = ("dense", "reference")
+
+
+def _repeats(method, workload):
+    """Default timed passes per measurement."""
+    if method == "reference" or workload == "quick":
+        return 1
+    if method == "dense" and workload != "W1":
+        return 2
+    return 3 if workload in ("W1", "W2") else 2
+
+
+def _merge(runs):
+    """One result from the measurements of a (method, workload) over the rounds: the
+    median over every timed pass, the median peak memory over the processes."""
+    merged = dict(runs[0])
+    merged["times"] = [t for r in runs for t in r["times"]]
+    merged["median_s"] = statistics.median(merged["times"])
+    for key in ("peak_rss_mib", "peak_above_start_mib"):
+        merged[key] = statistics.median(r[key] for r in runs)
+    merged["rounds"] = len(runs)
+    return merged
+
+
 def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=METHODS, repeats=None,
-        memory_limit_gib=24.0, device="cpu", echo=print, threads=0, in_process=False):
+        memory_limit_gib=24.0, device="cpu", echo=print, threads=0, in_process=False, rounds=3):
     """Benchmark `methods` on `workloads` and write the "## Rasterizer" section of out_path.
 
-    repeats: timed passes per measurement (default 5 on W1/W2, 3 on W3/W4, 1 for the
-    reference and on "quick"). memory_limit_gib: dense runs whose (P, N) tensors would
-    need more are skipped. threads: torch CPU threads in the workers (0: torch's default).
-    in_process: measure in this process instead of a fresh one per measurement (smoke
-    tests; memory then includes earlier measurements' leftovers).
-    Returns the list of result dicts.
+    Each workload is measured in `rounds` rounds, each running every method once in turn
+    (the slow SINGLE_ROUND methods only in the first), so that a machine whose speed
+    drifts (shared cores, steal time) slows every method alike and the ratios hold.
+    repeats: timed passes per measurement (default `_repeats`). memory_limit_gib: dense
+    runs whose (P, N) tensors would need more are skipped. threads: torch CPU threads in
+    the workers (0: torch's default). in_process: measure in this process instead of a
+    fresh one per measurement (smoke tests; memory then includes earlier measurements'
+    leftovers). Returns the list of result dicts.
     """
     for w in workloads:
         if w not in WORKLOADS:
@@ -322,30 +373,44 @@ def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=M
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"methods: unknown method {m!r}; expected some of {METHODS}")
+    if rounds < 1:
+        raise ValueError(f"rounds: expected at least 1, got {rounds}")
     results = []
     for w in workloads:
+        runs = {m: [] for m in methods}
+        skipped = {m: _skip_reason(m, w, memory_limit_gib, device) for m in methods}
+        for k in range(rounds):
+            for m in methods:
+                if skipped[m] is not None or (k > 0 and m in SINGLE_ROUND):
+                    continue
+                r = _measure(m, w, repeats or _repeats(m, w), device, threads, in_process)
+                if "skipped" in r:
+                    skipped[m] = r["skipped"]
+                    continue
+                runs[m].append(r)
+                echo(json.dumps({key: v for key, v in r.items() if key != "times"} | {"round": k + 1}))
         for m in methods:
-            reason = _skip_reason(m, w, memory_limit_gib)
-            if reason is None:
-                k = repeats or (1 if m == "reference" or w == "quick" else 5 if w in ("W1", "W2") else 3)
-                r = _measure(m, w, k, device, threads, in_process)
+            if skipped[m] is not None:
+                results.append({"method": m, "workload": w, "skipped": skipped[m]})
             else:
-                r = {"method": m, "workload": w, "skipped": reason}
-            results.append(r)
-            echo(json.dumps({k: v for k, v in r.items() if k != "times"}))
+                results.append(_merge(runs[m]))
     text = "\n\n".join([
         SECTION,
         f"Forward + backward (loss = <image, v> + <alpha, v'>, gradients of means, quats, scales, "
-        f"opacities, colours) of one {device.upper()} float32 render; median of the timed runs after "
-        f"one warm-up, each method and workload in a fresh process. Memory: the resident-set "
-        f"high-water mark (VmHWM) during the timed runs, absolute and above the resident size "
-        f"before them (interpreter, torch and the scene excluded; freed heap memory trimmed "
-        f"first; on CUDA the allocator's peak above its allocation before them). Scenes: "
-        f"`velogauss.bench.raster.make_scene` (seed 0; screen-space standard deviations "
-        f"0.2-2 px per axis, opacities 0.1-0.9).",
+        f"opacities, colours) of one {device.upper()} float32 render. Each workload runs in {rounds} "
+        f"rounds of fresh processes, one per method in turn (dense and reference in the first only), "
+        f"each with one warm-up and a few timed passes; the time is the median over all timed "
+        f"passes, so that drift in the machine's speed (shared cores) slows every method alike. "
+        f"Memory: the resident-set high-water mark (VmHWM) during the timed passes, absolute and "
+        f"above the resident size before them (interpreter, torch and the scene excluded; freed "
+        f"heap memory trimmed first; on CUDA the allocator's peak above its allocation before "
+        f"them), median over the rounds. Scenes: `velogauss.bench.raster.make_scene` (seed 0; "
+        f"screen-space standard deviations 0.2-2 px per axis, opacities 0.1-0.9). Ratios are to "
+        f"the default backend (what `rasterize(backend=\"auto\")` picks here: "
+        f"{default_method(device)}).",
         f"Machine: {machine()}.",
-        f"Regenerate: `{_command(workloads, methods, device, threads)}`",
-        _table(results, workloads, methods),
+        f"Regenerate: `{_command(workloads, methods, device, threads, rounds)}`",
+        _table(results, workloads, methods, device),
     ])
     write_section(out_path, SECTION, text)
     return results
@@ -361,7 +426,8 @@ def main(argv=None):
     parser.add_argument("--in-process", action="store_true",
                         help="measure in this process, not one fresh process per measurement")
     parser.add_argument("--methods", nargs="+", default=list(METHODS))
-    parser.add_argument("--repeats", type=int, default=None)
+    parser.add_argument("--repeats", type=int, default=None, help="timed passes per process")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of one process per method")
     parser.add_argument("--memory-limit-gib", type=float, default=24.0)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
@@ -372,8 +438,9 @@ def main(argv=None):
         return
     workloads = ("quick",) if args.quick else tuple(args.workloads)
     repeats = args.repeats or (1 if args.quick else None)
+    rounds = 1 if args.quick else args.rounds
     run(args.out, workloads, tuple(args.methods), repeats, args.memory_limit_gib, args.device,
-        threads=args.threads, in_process=args.in_process)
+        threads=args.threads, in_process=args.in_process, rounds=rounds)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""Optional compositing backends of `velogauss_fast.raster.rasterize` (backend="gsplat")."""
+"""Compositing backends of `velogauss_fast.raster.rasterize` beyond the vectorised torch one:
+"numba" (compiled CPU kernels) and "gsplat" (optional CUDA kernels)."""
 
 import importlib.util
 
@@ -12,3 +13,8 @@ def gsplat_available(device):
         and torch.cuda.is_available()
         and importlib.util.find_spec("gsplat") is not None
     )
+
+
+def numba_available():
+    """True when the numba package (the CPU kernels' compiler) is importable."""
+    return importlib.util.find_spec("numba") is not None

@@ -1,0 +1,108 @@
+"""Compiled CPU compositing for `velogauss_fast.raster.rasterize` (backend="numba").
+
+Projection, culling, colours and the row spans are the torch backend's own; only the
+compositing of VG-RENDER's pairs runs in the kernels of `numba_kernels`, forward and an
+analytic backward. No pair table is built: backward revisits the pairs through the
+same row spans and saves, per pixel, the final T and the rank of the last blended
+Gaussian and, per pair, its alpha (one float64 in visiting order, so the backward needs no
+exp). The kernels compute in float64 whatever the working dtype (inputs are cast up,
+outputs cast back), so a float32 render differs from the reference only by its float32
+inputs.
+
+The kernels release the GIL; one part of the image rows runs per torch CPU thread
+(torch.get_num_threads()), in a thread pool.
+"""
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import torch
+
+from velogauss_fast.backends import numba_kernels as nk
+
+_POOL = None
+_POOL_SIZE = 0
+_POOL_LOCK = threading.Lock()
+
+
+def _run_parts(kernel, n_parts, *args):
+    """kernel(part, n_parts, *args) for every part, in parallel; returns the results in part order."""
+    global _POOL, _POOL_SIZE
+    if n_parts == 1:
+        return [kernel(0, 1, *args)]
+    with _POOL_LOCK:
+        if _POOL_SIZE < n_parts:
+            if _POOL is not None:
+                _POOL.shutdown(wait=False)
+            _POOL = ThreadPoolExecutor(max_workers=n_parts, thread_name_prefix="velogauss-numba")
+            _POOL_SIZE = n_parts
+        pool = _POOL
+    return list(pool.map(lambda k: kernel(k, n_parts, *args), range(n_parts)))
+
+
+def _parameters(rgb, spans):
+    """The kernels' (n, N_COLUMNS) float64 parameter rows, in depth order: spans.geom, then rgb."""
+    return torch.cat([spans.geom, rgb.detach().index_select(0, spans.ids).to(torch.float64)], dim=1)
+
+
+class CompositeNumba(torch.autograd.Function):
+    """Per-pixel front-to-back compositing of VG-RENDER's pairs in the numba kernels.
+
+    Inputs mean2d (N, 2), conic (N, 3), opacity (N,), rgb (N, 3), background (3,) and
+    spans (velogauss_fast.raster._Spans, CPU); outputs image (P, 3) and final
+    transmittance T (P,), P = height * width, in the working dtype. Same outputs and
+    gradients as velogauss_fast.raster._Composite up to rounding.
+    """
+
+    @staticmethod
+    def forward(ctx, mean2d, conic, opacity, rgb, background, spans):
+        n_pix = spans.width * spans.height
+        prm = _parameters(rgb, spans)
+        color = np.zeros((n_pix, 3))
+        trans = np.ones(n_pix)
+        last = np.full(n_pix, -1, dtype=np.int64)
+        done = np.zeros(n_pix, dtype=np.uint8)
+        n_parts = max(1, min(torch.get_num_threads(), spans.height))
+        counts = np.zeros(n_parts, dtype=np.int64)
+        nk.count_pairs(n_parts, prm.numpy(), spans.width, counts)
+        alphas = [np.empty(c) for c in counts]
+        _run_parts(_forward_part, n_parts, prm.numpy(), spans.width, color, trans, last, done, alphas)
+        T_final = torch.from_numpy(trans)
+        image = torch.from_numpy(color) + T_final[:, None] * background.detach().to(torch.float64)
+        ctx.save_for_backward(prm, T_final, torch.from_numpy(last), background)
+        ctx.spans, ctx.alphas = spans, alphas
+        ctx.n = mean2d.shape[0]
+        dtype = mean2d.dtype
+        return image.to(dtype), T_final.to(dtype)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_image, g_T):
+        prm, T_final, last, background = ctx.saved_tensors
+        spans, dtype = ctx.spans, background.dtype
+        f64 = torch.float64
+        g_image = g_image.to(f64).contiguous()
+        # image = ... + T_final * background: the background term joins dL/dT_final.
+        g_tf = g_T.to(f64) + g_image @ background.to(f64)
+        g_background = (g_image * T_final[:, None]).sum(0).to(dtype)
+        alphas = ctx.alphas
+        n_parts = len(alphas)
+        grads = np.zeros((n_parts, prm.shape[0], nk.N_GRAD))
+        _run_parts(_backward_part, n_parts, prm.numpy(), spans.width, g_image.numpy(), T_final.numpy().copy(),
+                   (T_final * g_tf).numpy(), last.numpy(), alphas, grads)
+        # Parts summed in a fixed order: the result does not depend on thread scheduling.
+        per_gaussian = torch.zeros(ctx.n, nk.N_GRAD, dtype=f64)
+        per_gaussian.index_copy_(0, spans.ids, torch.from_numpy(grads.sum(0)))
+        g_mean2d, g_conic, g_opacity, g_rgb = per_gaussian.to(dtype).split([2, 3, 1, 3], dim=1)
+        return g_mean2d, g_conic, g_opacity.squeeze(1), g_rgb, g_background, None
+
+
+def _forward_part(part, n_parts, prm, width, color, trans, last, done, alphas):
+    """One part's forward, filling its own alpha buffer."""
+    nk.composite_forward(part, n_parts, prm, width, color, trans, last, done, alphas[part])
+
+
+def _backward_part(part, n_parts, prm, width, g_image, trans, behind, last, alphas, grads):
+    """One part's backward, from its own alpha buffer into its own slice of grads (parts, n, N_GRAD)."""
+    nk.composite_backward(part, n_parts, prm, width, g_image, trans, behind, last, alphas[part], grads[part])
