@@ -135,3 +135,13 @@ def test_numba_refuses_cuda_tensors():
     scene = scene_to_torch(random_scene(np.random.default_rng(3), 5, 8, 6), torch.float32, "cuda")
     with pytest.raises(ValueError, match="^backend: 'numba' needs CPU tensors"):
         raster.rasterize(**scene, backend="numba")
+
+
+def test_kernel_columns_follow_the_span_columns():
+    # The kernels index spans.geom by position: a reordering in raster.py must show here.
+    named = {"u": "U", "v": "V", "a": "CA", "b": "CB", "c": "CC", "opacity": "OPACITY", "two_as": "TWO_AS",
+             "det": "DET", "inv_a": "INV_A", "b_over_a": "B_OVER_A", "definite": "DEFINITE", "x0": "X0",
+             "x1": "X1", "y0": "Y0", "y1": "Y1"}
+    assert [getattr(numba_kernels, named[c]) for c in raster.SPAN_COLUMNS] == list(range(len(raster.SPAN_COLUMNS)))
+    assert (numba_kernels.RED, numba_kernels.GREEN, numba_kernels.BLUE) == tuple(
+        range(len(raster.SPAN_COLUMNS), numba_kernels.N_COLUMNS))
