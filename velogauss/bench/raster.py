@@ -3,7 +3,7 @@
 Methods, all on the same random scenes (float32, CPU unless --device says otherwise):
 
 * numba     -- velogauss_fast.raster.rasterize(backend="numba"): compiled Gaussian-major
-               compositing, analytic backward, nothing stored per pair (CPU only);
+               compositing, analytic backward, no pair table (CPU only);
 * torch     -- rasterize(backend="torch"): vectorised compositing over the sorted pair
                table, analytic backward (any device);
 * gsplat    -- rasterize(backend="gsplat"): gsplat's CUDA kernels (CUDA with gsplat only);
@@ -45,6 +45,7 @@ import torch
 
 from velogauss.bench.harness import (machine, peak_above_mib, regenerate_command, reset_peak_memory, status_kib,
                                       write_section)
+from velogauss_fast.backends import gsplat_available
 from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 SECTION = "## Rasterizer"
@@ -249,16 +250,12 @@ def _worker(method, workload, repeats, device, threads=0):
 
 def default_method(device):
     """The method `rasterize(backend="auto")` amounts to on `device`; ratios are taken to it."""
-    from velogauss_fast.backends import gsplat_available
-
     if torch.device(device).type == "cpu":
         return "numba"
     return "gsplat" if gsplat_available(device) else "torch"
 
 
 def _skip_reason(method, workload, memory_limit_gib, device="cpu"):
-    from velogauss_fast.backends import gsplat_available
-
     wl = WORKLOADS[workload]
     if method == "numba" and torch.device(device).type != "cpu":
         return "CPU only"

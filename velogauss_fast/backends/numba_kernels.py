@@ -48,20 +48,15 @@ _JIT = dict(cache=True, nogil=True, error_model="numpy")
 def row_span(prm, rank, row, width):
     """Columns [xa, xb] of box row `row` where Gaussian `rank` can have alpha >= ALPHA_MIN, and
     whether they come from the ellipse (False: the whole box row of an indefinite conic)."""
-    return _span(row, width, prm[rank, U], prm[rank, V], prm[rank, TWO_AS], prm[rank, DET], prm[rank, INV_A],
-                 prm[rank, B_OVER_A], prm[rank, DEFINITE], int(prm[rank, X0]), int(prm[rank, X1]))
-
-
-@numba.njit(**_JIT)
-def _span(row, width, u, v, two_as, det, inv_a, b_over_a, definite, x0, x1):
-    if definite == 0.0:
+    x0, x1 = int(prm[rank, X0]), int(prm[rank, X1])
+    if prm[rank, DEFINITE] == 0.0:
         return x0, x1, False
-    dv = row + 0.5 - v
-    disc = two_as - det * dv * dv
+    dv = row + 0.5 - prm[rank, V]
+    disc = prm[rank, TWO_AS] - prm[rank, DET] * dv * dv
     if disc < 0:
         return x0, x0 - 1, True
-    half = math.sqrt(disc) * inv_a
-    centre = u - b_over_a * dv
+    half = math.sqrt(disc) * prm[rank, INV_A]
+    centre = prm[rank, U] - prm[rank, B_OVER_A] * dv
     lo = math.ceil(centre - half - 0.5)
     hi = math.floor(centre + half - 0.5)
     if not (lo == lo and hi == hi):  # NaN from an extreme conic: keep the whole box row
@@ -123,10 +118,10 @@ def composite_forward(part, n_parts, prm, width, color, trans, last, done, alpha
                 if not ellipse:
                     alpha = pair_alpha(a, b, c, o, du, dv)
                 else:
-                    if (x - xa) % EXP_RESTART == 0:
-                        e = o * math.exp(-(0.5 * (a * du * du + c * dv * dv) + b * du * dv))
-                        step = math.exp(-(a * du + 0.5 * a + b * dv))
                     sigma = 0.5 * (a * du * du + c * dv * dv) + b * du * dv
+                    if (x - xa) % EXP_RESTART == 0:
+                        e = o * math.exp(-sigma)
+                        step = math.exp(-(a * du + 0.5 * a + b * dv))
                     alpha = min(e, ALPHA_MAX)
                     if sigma < 0 or alpha < ALPHA_MIN:
                         alpha = 0.0
