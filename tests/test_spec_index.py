@@ -68,8 +68,8 @@ def test_readme_spec_table_is_current():
 
 
 def test_every_constant_is_named_in_the_spec():
-    """spec/conventions.md's constants table lists every constant of velogauss_ref.constants."""
-    from velogauss_ref import constants
+    """spec/conventions.md's constants table lists every constant of velogauss_core.constants."""
+    from velogauss_core import constants
 
     table = (ROOT / "spec" / "conventions.md").read_text().split("## Constants", 1)[1]
     rows = {line.split("|")[1].strip(): line for line in table.splitlines() if line.startswith("| `")}

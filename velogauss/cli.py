@@ -265,8 +265,8 @@ def walkthrough_command(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder (docs refreshes the committed copy)."),
 ):
     """Write the equation-by-equation walkthrough, OUT/walkthrough.md and OUT/figures/, by running the
-    NumPy reference (velogauss_ref.walkthrough)."""
-    from velogauss_ref.walkthrough import write_walkthrough
+    NumPy reference (velogauss.walkthrough)."""
+    from velogauss.walkthrough import write_walkthrough
 
     with user_errors():
         page = write_walkthrough(out)

@@ -14,10 +14,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from velogauss_ref.motion.config import MotionConfig
-
-ABLATIONS = ("full", "no-pds", "no-adf", "no-gpc", "deform-only")
-INTEGRATORS = ("euler", "rk2", "rk4")
+from velogauss_core.motion import ABLATIONS, INTEGRATORS, MotionConfig
 
 
 @dataclass(frozen=True)

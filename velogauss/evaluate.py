@@ -31,11 +31,11 @@ spaced times in [0, 1]; those `> max_time` are the future):
   physics losses make it.
   Predicting zero velocity gives a relative error of exactly 1. A model without a velocity
   field (the "deform-only" ablation) has no velocity to score: every velocity error is None.
-- trajectories: the Gaussians whose canonical mean `μ0 = base_positions(0)` lies inside
+- trajectories: the Gaussians whose canonical mean `μ0 = tracked_positions(0)` lies inside
   or within `EVAL_SURFACE_MARGIN` (world units) of a moving body at t = 0 and whose opacity
   is at least `ALPHA_MIN` (lower opacities never reach a pixel, VG-ALPHA) are followed:
-  `error(t) = mean_i |base_positions(t)_i − position(μ0_i, t)|` (world units), the
-  physics-only trajectory (VG-TRAJ, without the auxiliary deformation) against the true
+  `error(t) = mean_i |tracked_positions(t)_i − position(μ0_i, t)|` (world units): with a
+  velocity field the physics-only trajectory x*(t) (VG-TRAJ, without the auxiliary deformation) against the true
   path of the material point at `μ0`. Reported next to it: `mean_i |position(μ0_i, t) − μ0_i|`,
   the error a model that does not move at all would have. A model without a velocity field
   has no physics trajectory; its rendered means (canonical plus deformation) are followed
@@ -51,8 +51,8 @@ from tqdm.auto import tqdm
 from velogauss.io_utils import to_numpy
 from velogauss.scenes.motions import StaticMotion
 from velogauss_fast import metrics
-from velogauss_ref.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN
-from velogauss_ref.lpips_nets import min_image_size, weights_file
+from velogauss_core.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN
+from velogauss_core.lpips_nets import min_image_size, weights_file
 
 IMAGE_METRICS = ("psnr", "ssim", "lpips_alex", "lpips_vgg")
 LPIPS_NETS = {"lpips_alex": "alex", "lpips_vgg": "vgg"}

@@ -20,8 +20,8 @@ import numpy as np
 
 from velogauss.io_utils import to_numpy, write_bytes
 from velogauss_fast.sh import C0
-from velogauss_ref.checks import check_array
-from velogauss_ref.constants import EXPORT_OPACITY_CLAMP, QUAT_ZERO_NORM_SQ
+from velogauss_core.checks import check_array
+from velogauss_core.constants import EXPORT_OPACITY_CLAMP, QUAT_ZERO_NORM_SQ
 
 
 def ply_property_names(sh_degree):

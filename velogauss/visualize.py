@@ -34,7 +34,7 @@ from tqdm.auto import tqdm  # noqa: E402
 
 from velogauss.evaluate import query, render_frames  # noqa: E402
 from velogauss.io_utils import save_figure, to_uint8, write_animation, write_png  # noqa: E402
-from velogauss_ref.constants import EVAL_SURFACE_MARGIN  # noqa: E402
+from velogauss_core.constants import EVAL_SURFACE_MARGIN  # noqa: E402
 
 FILMSTRIP_COLUMNS = 8
 TRAJECTORY_GAUSSIANS = 150

@@ -1,26 +1,26 @@
 """Input validation for the torch fast path (spec/conventions.md, "Bad input").
 
-The twin of `velogauss_ref.checks` for tensors: bad input raises ValueError whose message
+The twin of `velogauss_core.checks.check_array` for tensors: bad input raises ValueError whose message
 starts with the argument's name. Checks run on the tensor's own device (no host copy of
 the data, one device sync for the finiteness flag) and never touch autograd.
 """
 
 import torch
 
-from velogauss_ref.checks import _fmt, _shape_matches
+from velogauss_core.checks import format_shape, shape_matches
 
 
 def check_array(name, x, shape=None):
     """Raise ValueError unless `x` is a finite real floating tensor matching `shape`.
 
-    `shape` follows `velogauss_ref.checks.check_array`: a tuple of ints (exact size), None
+    `shape` is a `velogauss_core.checks.Shape`: a tuple of ints (exact size), None
     (any size) and optionally "..." first (any leading batch dimensions).
     Returns `x` unchanged so calls can be chained.
     """
     if not isinstance(x, torch.Tensor):
         raise ValueError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
-    if shape is not None and not _shape_matches(tuple(x.shape), shape):
-        raise ValueError(f"{name}: expected shape {_fmt(shape)}, got {tuple(x.shape)}")
+    if shape is not None and not shape_matches(tuple(x.shape), shape):
+        raise ValueError(f"{name}: expected shape {format_shape(shape)}, got {tuple(x.shape)}")
     if not x.is_floating_point():
         raise ValueError(f"{name}: expected a floating-point tensor, got dtype {x.dtype}")
     # x * 0 is 0 where x is finite and NaN where it is inf or NaN, so one product and one

@@ -6,8 +6,8 @@ dtype and on their device.
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.metrics import ssim
-from velogauss_ref.constants import LAMBDA_DSSIM
-from velogauss_ref.losses import check_weight
+from velogauss_core.constants import LAMBDA_DSSIM
+from velogauss_core.checks import check_weight
 
 
 def photometric_loss(pred, gt):

@@ -13,9 +13,10 @@ import torch
 import torch.nn.functional as F
 
 from velogauss_fast.checks import check_array
-from velogauss_ref.constants import LPIPS_NORM_EPS, PSNR_MSE_FLOOR, SSIM_K1, SSIM_K2, SSIM_WINDOW
-from velogauss_ref.lpips_nets import LAYERS, SCALE, SHIFT, TAPS, check_net, min_image_size, read_weights, weights_file
-from velogauss_ref.metrics import check_image_size, gaussian_window
+from velogauss_core.constants import LPIPS_NORM_EPS, PSNR_MSE_FLOOR, SSIM_K1, SSIM_K2, SSIM_WINDOW
+from velogauss_core.lpips_nets import LAYERS, SCALE, SHIFT, TAPS, check_net, min_image_size, read_weights, weights_file
+from velogauss_core.checks import check_image_size
+from velogauss_core.windows import gaussian_window
 
 
 def psnr(pred, gt):
@@ -65,7 +66,7 @@ def lpips(pred, gt, net="alex", weights_dir=None):
 
     pred, gt: (H, W, 3) in [0, 1], at least `min_image_size(net)` pixels (31 for alex, 16
     for vgg) each way; net: "alex" or "vgg"; weights_dir: folder of `<net>.npz`, or None
-    for the resolution order of `velogauss_ref.lpips_nets`. The computation of
+    for the resolution order of `velogauss_core.lpips_nets`. The computation of
     `velogauss_ref.metrics.lpips` with torch's conv2d / max_pool2d, both images in one
     batch. Differentiable except where a tapped feature vector is exactly zero (the
     norm's derivative is undefined there); meant for evaluation, under torch.no_grad().

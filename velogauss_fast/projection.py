@@ -6,7 +6,7 @@ Twin of `velogauss_ref.projection` (spec/rendering.md, VG-PROJ).
 import torch
 
 from velogauss_fast.checks import check_array
-from velogauss_ref.constants import (
+from velogauss_core.constants import (
     EIGEN_DISCRIMINANT_FLOOR,
     EPS2D,
     FAR_PLANE,
@@ -14,7 +14,7 @@ from velogauss_ref.constants import (
     GAUSSIAN_EXTENT_SIGMA,
     NEAR_PLANE,
 )
-from velogauss_ref.projection import check_size
+from velogauss_core.checks import check_size
 
 # Radii are capped here before the integer cast: a splat wider than this covers any
 # image we can allocate, and the cap keeps absurd covariances (float32 overflow in

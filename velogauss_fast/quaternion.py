@@ -6,7 +6,7 @@ Twin of `velogauss_ref.quaternion` (spec/rendering.md, VG-QUAT and VG-QUAT-MUL).
 import torch
 
 from velogauss_fast.checks import check_array
-from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
+from velogauss_core.constants import QUAT_ZERO_NORM_SQ
 
 
 def quat_to_rotmat(q):
@@ -54,3 +54,17 @@ def quat_multiply(a, b):
         ],
         dim=-1,
     )
+
+
+def normalize_quat(q):
+    """q / |q| for q: (..., 4) (VG-QUAT); |q|^2 < QUAT_ZERO_NORM_SQ gives (1, 0, 0, 0) with zero gradient.
+
+    The one normalisation of the fast path (spec/conventions.md, "Quaternions"): a zero or
+    denormal quaternion is the identity rotation, as in `quat_to_rotmat`.
+    """
+    n2 = (q * q).sum(-1, keepdim=True)
+    zero = n2 < QUAT_ZERO_NORM_SQ
+    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=q.dtype, device=q.device)
+    # Divide a stand-in where q is ~0 so that neither pass of the discarded branch sees 0/0.
+    q_safe = torch.where(zero, identity, q)
+    return q_safe / torch.sqrt(torch.where(zero, torch.ones_like(n2), n2))

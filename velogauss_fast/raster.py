@@ -41,9 +41,8 @@ from velogauss_fast.checks import check_array
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
 from velogauss_fast.sh import sh_to_color, viewing_directions
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
-from velogauss_ref.projection import check_size
-from velogauss_ref.sh import check_degree
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+from velogauss_core.checks import check_degree, check_size
 
 # Pairs composited per chunk: bounds the temporaries of forward and backward (about 100
 # bytes per pair) to ~25 MB while keeping the per-chunk Python overhead negligible. Measured

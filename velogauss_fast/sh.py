@@ -6,7 +6,7 @@ Twin of `velogauss_ref.sh` (spec/rendering.md, VG-SH).
 import torch
 
 from velogauss_fast.checks import check_array
-from velogauss_ref.sh import check_degree
+from velogauss_core.checks import check_degree
 
 # Real SH normalisation constants of 3DGS's sh_utils.py (degree 0..3).
 C0 = 0.28209479177387814

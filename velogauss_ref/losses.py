@@ -5,8 +5,9 @@ spec/losses_metrics.md, VG-LOSS and VG-LOSS-PHYS. Differentiable by autograd.
 
 import autograd.numpy as np
 
-from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.constants import LAMBDA_DSSIM
+from velogauss_core.checks import check_weight
+from velogauss_ref.checks import check_array
+from velogauss_core.constants import LAMBDA_DSSIM
 from velogauss_ref.metrics import ssim
 
 
@@ -40,11 +41,3 @@ def physics_loss(r, div, lambda_transport, lambda_div):
     if div is not None:
         loss = loss + lambda_div * np.sum(div * div) / count
     return loss
-
-
-def check_weight(name, value):
-    """Raise ValueError naming `name` unless `value` is a finite real number >= 0; return it."""
-    check_scalar(name, value)
-    if value < 0:
-        raise ValueError(f"{name}: expected a weight >= 0, got {value!r}")
-    return value

@@ -3,7 +3,7 @@
 spec/losses_metrics.md, VG-METRIC, VG-METRIC-SSIM, VG-METRIC-LPIPS. Images are H x W x 3
 in [0, 1]. PSNR and SSIM are differentiable by autograd (SSIM is half of the photometric
 loss, VG-LOSS); LPIPS is an evaluation metric written in plain NumPy, a literal
-convolution network that reads its weights through `velogauss_ref.lpips_nets`.
+convolution network that reads its weights through `velogauss_core.lpips_nets`.
 """
 
 import functools
@@ -12,9 +12,11 @@ import autograd.numpy as np
 import numpy as onp
 from numpy.lib.stride_tricks import sliding_window_view
 
+from velogauss_core.checks import check_image_size
+from velogauss_core.windows import gaussian_window
 from velogauss_ref.checks import check_array
-from velogauss_ref.constants import LPIPS_NORM_EPS, PSNR_MSE_FLOOR, SSIM_K1, SSIM_K2, SSIM_SIGMA, SSIM_WINDOW
-from velogauss_ref.lpips_nets import LAYERS, SCALE, SHIFT, TAPS, check_net, min_image_size, read_weights, weights_file
+from velogauss_core.constants import LPIPS_NORM_EPS, PSNR_MSE_FLOOR, SSIM_K1, SSIM_K2, SSIM_WINDOW
+from velogauss_core.lpips_nets import LAYERS, SCALE, SHIFT, TAPS, check_net, min_image_size, read_weights, weights_file
 
 
 def psnr(pred, gt):
@@ -51,16 +53,6 @@ def ssim(pred, gt):
     return np.mean(ssim_map)
 
 
-def gaussian_window(size=SSIM_WINDOW, sigma=SSIM_SIGMA):
-    """The 1D SSIM window (size,): exp(-x^2 / (2 sigma^2)) at x = -(size-1)/2 .. (size-1)/2, summing to 1.
-
-    The 2D window is its outer product with itself (scipy.ndimage.gaussian_filter's
-    kernel with radius 5, which scikit-image's SSIM uses).
-    """
-    x = onp.arange(size) - (size - 1) / 2
-    g = onp.exp(-0.5 * x**2 / sigma**2)
-    return g / g.sum()
-
 
 def _filter_valid(image, g):
     """Correlation of each channel of `image` (H, W, C) with the window g outer g, valid
@@ -76,7 +68,7 @@ def lpips(pred, gt, net="alex", weights_dir=None):
 
     pred, gt: (H, W, 3) in [0, 1], at least `min_image_size(net)` pixels (31 for alex, 16
     for vgg) in each direction; net: "alex" or "vgg"; weights_dir: folder of `<net>.npz`,
-    or None for the resolution order of `velogauss_ref.lpips_nets`.
+    or None for the resolution order of `velogauss_core.lpips_nets`.
     Each image goes to [-1, 1], then (x - SHIFT) / SCALE, through the backbone's layers;
     at each of the five taps (ReLU outputs) every pixel's channel vector is divided by its
     norm + LPIPS_NORM_EPS, the squared difference of the two images' vectors is weighted
@@ -143,12 +135,3 @@ def check_image_pair(pred, gt, min_size=1, why=""):
     check_array("pred", pred, (None, None, 3))
     check_array("gt", gt, np.shape(pred))
     check_image_size(np.shape(pred), min_size, why)
-
-
-def check_image_size(shape, min_size, why):
-    """Raise ValueError naming `pred` when an image of `shape` (H, W, 3) is smaller than
-    `min_size` x `min_size` pixels, which `why` needs."""
-    height, width = shape[:2]
-    if min(height, width) < min_size:
-        raise ValueError(f"pred: {why} needs images of at least {min_size} x {min_size} pixels, "
-                         f"got {height} x {width}")

@@ -7,8 +7,9 @@ import autograd.numpy as np
 import numpy as onp
 from autograd.tracer import getval
 
+from velogauss_core.checks import check_size
 from velogauss_ref.checks import check_array
-from velogauss_ref.constants import (
+from velogauss_core.constants import (
     EIGEN_DISCRIMINANT_FLOOR,
     EPS2D,
     FAR_PLANE,
@@ -117,10 +118,3 @@ def _radius(cov2d):
     b = 0.5 * (s00 + s11)
     lambda_max = b + onp.sqrt(onp.maximum(EIGEN_DISCRIMINANT_FLOOR, b * b - det))
     return onp.ceil(GAUSSIAN_EXTENT_SIGMA * onp.sqrt(lambda_max)).astype(onp.int64)
-
-
-def check_size(name, n):
-    """Raise ValueError unless `n` is a positive int (an image width or height); return it."""
-    if isinstance(n, (bool, onp.bool_)) or not isinstance(n, (int, onp.integer)) or n <= 0:
-        raise ValueError(f"{name}: expected a positive int, got {n!r}")
-    return int(n)

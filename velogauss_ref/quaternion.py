@@ -4,9 +4,13 @@ spec/rendering.md, VG-QUAT and VG-QUAT-MUL; conventions in spec/conventions.md (
 """
 
 import autograd.numpy as np
+import numpy as onp
 
 from velogauss_ref.checks import check_array
-from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
+from velogauss_core.constants import QUAT_ZERO_NORM_SQ
+
+# The quaternion of no rotation, (w, x, y, z) = (1, 0, 0, 0).
+IDENTITY_QUAT = onp.array([1.0, 0.0, 0.0, 0.0])
 
 
 def quat_to_rotmat(q):
@@ -56,3 +60,15 @@ def quat_multiply(a, b):
         ],
         axis=-1,
     )
+
+
+def normalize_quat(q):
+    """q / |q| for q: (..., 4) (VG-QUAT); |q|^2 < QUAT_ZERO_NORM_SQ gives (1, 0, 0, 0) with zero gradient.
+
+    The stand-in is substituted before dividing, so neither branch of np.where sees 0 / 0,
+    forward or backward (as in `quat_to_rotmat`).
+    """
+    n2 = np.sum(q * q, axis=-1, keepdims=True)
+    zero = n2 < QUAT_ZERO_NORM_SQ
+    q_safe = np.where(zero, IDENTITY_QUAT, q)
+    return q_safe / np.sqrt(np.where(zero, 1.0, n2))

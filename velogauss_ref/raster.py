@@ -10,10 +10,11 @@ import numpy as onp
 from autograd.tracer import getval
 
 from velogauss_ref.checks import check_array
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 from velogauss_ref.covariance import covariance_3d
-from velogauss_ref.projection import check_size, project_gaussians
-from velogauss_ref.sh import check_degree, sh_to_color, viewing_directions
+from velogauss_core.checks import check_degree, check_size
+from velogauss_ref.projection import project_gaussians
+from velogauss_ref.sh import sh_to_color, viewing_directions
 
 
 def splat_alpha(pixel, mean2d, conic, opacity):

@@ -4,8 +4,8 @@ spec/rendering.md, VG-SH.
 """
 
 import autograd.numpy as np
-import numpy as onp
 
+from velogauss_core.checks import check_degree
 from velogauss_ref.checks import check_array
 
 # Real SH normalisation constants of 3DGS's utils/sh_utils.py, bands 0..3.
@@ -93,12 +93,6 @@ def viewing_directions(means, viewmat):
     check_array("means", means, (None, 3))
     return means - camera_centre(viewmat)
 
-
-def check_degree(name, degree):
-    """Raise ValueError unless `degree` is an int SH degree in {0, 1, 2, 3}; return it."""
-    if isinstance(degree, (bool, onp.bool_)) or not isinstance(degree, (int, onp.integer)) or not 0 <= degree <= 3:
-        raise ValueError(f"{name}: expected 0, 1, 2 or 3, got {degree!r}")
-    return int(degree)
 
 
 def _unit(dirs):

@@ -12,7 +12,7 @@ from velogauss.bench import accuracy
 from velogauss.scenes.catalog import SCENES
 from velogauss_fast.motion.coefficients import coefficients
 from velogauss_fast.motion.params import params_to_torch
-from velogauss_ref.motion.config import MotionConfig
+from velogauss_core.motion import MotionConfig
 
 # Ratio of the errors at h and h / 2, per method: 2^p (1 + O(h)). The step sizes of QUICK
 # keep |omega| h <= 0.2, where the next term of the error expansion moves the ratio by a

@@ -12,7 +12,7 @@ from velogauss import evaluate
 from velogauss.data import Camera, Frame
 from velogauss.data.cameras import intrinsics_from_fov, look_at
 from velogauss.scenes import SCENES
-from velogauss_ref.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN, SSIM_K1, SSIM_K2
+from velogauss_core.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN, SSIM_K1, SSIM_K2
 
 LPIPS_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "lpips"
 SIZE = 24  # >= the 11-tap SSIM window

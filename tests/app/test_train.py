@@ -20,6 +20,7 @@ from velogauss.train.optim import make_optimizer
 from velogauss.train.sampling import FrameSampler
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss.visualize import render_run
+from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import coefficients as velocity_coefficients
 from velogauss_fast.motion.velocity import velocity as affine_velocity
 
@@ -214,7 +215,8 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
     assert torch.isfinite(a).all() and torch.equal(a, b)
     has_velocity = ablation != "deform-only"
     assert reloaded.has_velocity == has_velocity
-    assert (reloaded.motion.use_adf) == (ablation != "no-adf")
+    assert reloaded.spec.adf == (ablation != "no-adf")
+    assert hasattr(reloaded.motion, "adf") == reloaded.spec.adf
     # Its pictures: a velocity field figure only where there is a velocity field.
     written = {p.name for p in render_run(reloaded, tiny_scene, tmp_path / "renders")}
     assert {"sequence.gif", "filmstrip.png", "trajectories.png"} <= written
@@ -233,6 +235,6 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
         # ... elsewhere it keeps the start's code, where the field reads the code at x.
         moved, field = model.particle_velocity(x0, x, 0.4), model.velocity_at(x, 0.4)
         assert (moved - field).abs().max() > 1e-3
-        z0 = model.motion.codes(x0)
-        w = velocity_coefficients(model.motion.params(), 0.4, z0, model.motion.cfg)
+        params, cfg_m = model.motion.params(), model.spec.config
+        w = velocity_coefficients(params, 0.4, physics_code(params, x0, cfg_m), cfg_m)
         assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)

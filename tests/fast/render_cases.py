@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, settings
 
 from tests.ref.cameras import intrinsics, rigid_viewmat, to_world
 from velogauss_fast.raster import rasterize as fast_rasterize
-from velogauss_ref.constants import (
+from velogauss_core.constants import (
     ALPHA_MAX,
     ALPHA_MIN,
     EIGEN_DISCRIMINANT_FLOOR,

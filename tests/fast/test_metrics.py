@@ -15,7 +15,7 @@ from tests.ref.test_metrics import LPIPS_ATOL, image_pair, needs_lpips_data, ski
 from velogauss_fast import metrics
 from velogauss_fast.metrics import lpips, psnr, ssim
 from velogauss_ref import metrics as ref
-from velogauss_ref.lpips_nets import CHECKOUT_DIR, min_image_size
+from velogauss_core.lpips_nets import CHECKOUT_DIR, min_image_size
 
 seeds = st.integers(0, 2**32 - 1)
 sizes = st.integers(11, 24)

@@ -20,7 +20,7 @@ from velogauss_fast.backends import numba_kernels
 from velogauss_fast.backends.numba_backend import CompositeNumba, _parameters
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
-from velogauss_ref.constants import ALPHA_MAX
+from velogauss_core.constants import ALPHA_MAX
 
 
 def spans_of(scene, dtype=torch.float64):

@@ -18,7 +18,7 @@ from tests.fast.render_cases import (
 from tests.ref.cameras import in_view, intrinsics, rigid_viewmat, to_world
 from velogauss_fast.projection import project_gaussians
 from velogauss_ref import projection as ref
-from velogauss_ref.constants import EPS2D, FAR_PLANE, FRUSTUM_GUARD, NEAR_PLANE
+from velogauss_core.constants import EPS2D, FAR_PLANE, FRUSTUM_GUARD, NEAR_PLANE
 from velogauss_ref.covariance import covariance_3d
 
 FLOAT_KEYS = ("mean2d", "depth", "cov2d", "conic")

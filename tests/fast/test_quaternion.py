@@ -10,7 +10,7 @@ from hypothesis.extra import numpy as hnp
 from tests.fast.render_cases import DEVICE_SETTINGS, check_agreement, check_float32, gradcheck_fn
 from velogauss_fast.quaternion import quat_multiply, quat_to_rotmat
 from velogauss_ref import quaternion as ref
-from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
+from velogauss_core.constants import QUAT_ZERO_NORM_SQ
 
 coords = st.floats(-2.0, 2.0, allow_nan=False)
 

@@ -39,7 +39,7 @@ from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
 from velogauss_fast.raster import blend, rasterize, splat_alpha
 from velogauss_ref import raster as ref
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 DTYPES = [torch.float32, torch.float64]
 # Band half-widths (relative): float64 renders reproduce the reference to ~1e-15, so 1e-9

@@ -22,7 +22,7 @@ from tests.fast.render_cases import (
 from tests.ref.cameras import in_view, intrinsics
 from velogauss_fast.raster import rasterize
 from velogauss_ref import raster as ref
-from velogauss_ref.constants import ALPHA_MAX, EPS2D, NEAR_PLANE, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, EPS2D, NEAR_PLANE, TRANSMITTANCE_MIN
 
 K = intrinsics(10.0, 10.0, 4.0, 4.0)
 WIDTH = HEIGHT = 8

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.test_metrics import SSIM_FD_STEP, skimage_ssim
-from velogauss_ref.constants import LAMBDA_DSSIM
+from velogauss_core.constants import LAMBDA_DSSIM
 from velogauss_ref.losses import photometric_loss, physics_loss
 
 seeds = st.integers(0, 2**32 - 1)

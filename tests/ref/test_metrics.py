@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 from skimage.metrics import structural_similarity
 
 from tests.ref.gradcheck import check_grads_fd
-from velogauss_ref.constants import SSIM_K1
-from velogauss_ref.lpips_nets import CHECKOUT_DIR
+from velogauss_core.constants import SSIM_K1
+from velogauss_core.lpips_nets import CHECKOUT_DIR
 from velogauss_ref.metrics import lpips, psnr, ssim
 
 needs_lpips_data = pytest.mark.skipif(not (CHECKOUT_DIR / "reference.json").is_file(),

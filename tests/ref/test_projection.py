@@ -9,7 +9,7 @@ from hypothesis.extra import numpy as hnp
 
 from tests.ref.cameras import in_view, intrinsics, rigid_viewmat, to_world
 from tests.ref.gradcheck import check_grads_fd
-from velogauss_ref.constants import EPS2D, FAR_PLANE, FRUSTUM_GUARD, GAUSSIAN_EXTENT_SIGMA, NEAR_PLANE
+from velogauss_core.constants import EPS2D, FAR_PLANE, FRUSTUM_GUARD, GAUSSIAN_EXTENT_SIGMA, NEAR_PLANE
 from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.projection import project_gaussians
 

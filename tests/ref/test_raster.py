@@ -10,7 +10,7 @@ from hypothesis.extra import numpy as hnp
 
 from tests.ref.cameras import in_view, intrinsics, rigid_viewmat, to_world
 from tests.ref.gradcheck import check_grads_fd
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, EPS2D, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, EPS2D, TRANSMITTANCE_MIN
 from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.projection import project_gaussians
 from velogauss_ref.raster import blend, rasterize, splat_alpha

@@ -12,7 +12,7 @@ from autograd import jacobian, make_vjp
 from autograd.tracer import getval
 
 from tests.ref.cameras import in_view, intrinsics
-from velogauss_ref.constants import ALPHA_MAX, EPS2D, NEAR_PLANE, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, EPS2D, NEAR_PLANE, TRANSMITTANCE_MIN
 from velogauss_ref.quaternion import quat_to_rotmat
 from velogauss_ref.raster import rasterize
 

@@ -34,6 +34,7 @@ import torch
 from velogauss.bench.harness import machine, regenerate_command, write_section
 from velogauss.config import load_config
 from velogauss.model import build_model, resolve_profile
+from velogauss.model.motion import motion_residuals
 from velogauss.scenes import SCENES
 
 SECTION = "## Effect profiles: cost of motion per iteration"
@@ -86,7 +87,7 @@ def time_physics(model, profile, bounds, repeats, seed=0):
 
     def once():
         start = time.perf_counter()
-        r, div = model.motion.residuals(x, 0.5, divergence=profile.divergence)
+        r, div = motion_residuals(model.motion.params(), model.spec, x, 0.5)
         loss = r.square().mean() + (div.square().mean() if div is not None else 0.0)
         torch.autograd.grad(loss, params, allow_unused=True)
         return time.perf_counter() - start

@@ -46,7 +46,7 @@ import torch
 from velogauss.bench.harness import (machine, peak_above_mib, regenerate_command, reset_peak_memory, status_kib,
                                       write_section)
 from velogauss_fast.backends import gsplat_available
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 SECTION = "## Rasterizer"
 COMMAND = "python -m velogauss.bench.raster"

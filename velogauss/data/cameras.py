@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.constants import POSE_ORTHONORMAL_TOL
+from velogauss_core.checks import check_array, check_scalar
+from velogauss_core.constants import POSE_ORTHONORMAL_TOL
 
 # OpenGL -> OpenCV camera axes: flip y (up -> down) and z (backward -> forward).
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])

@@ -1,80 +1,53 @@
 """Assemble a `VeloGaussModel` from a training config and a scene.
 
-The ablations of the paper (Table "ablation") map to switches here:
-
-| ablation     | velocity        | ADF | physics losses (GPC) |
-|--------------|-----------------|-----|----------------------|
-| full         | affine (PDS)    | yes | yes                  |
-| no-pds       | MLP v(γ(x), t)  | yes | yes                  |
-| no-adf       | affine (PDS)    | no  | yes                  |
-| no-gpc       | affine (PDS)    | yes | no                   |
-| deform-only  | none            | yes | no  (DefGS-style)    |
+The config's model section, the scene's `MotionProfile` and the ablation are resolved once
+into a `MotionSpec` (velogauss.model.spec); the model's parameters are laid out by it.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
+import torch
 
 from velogauss.model.dynamic import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
-from velogauss.model.motion import MotionModel, motion_config
+from velogauss.model.motion import MotionParameters
 from velogauss.model.profile import MotionProfile, resolve_profile
+from velogauss.model.spec import resolve_motion_spec
 
 
-@dataclass(frozen=True)
-class Switches:
-    """The ablation switches: velocity kind ("affine", "mlp" or None), ADF, GPC."""
-
-    velocity: object
-    adf: bool
-    gpc: bool
-
-
-ABLATION_SWITCHES = {
-    "full": Switches("affine", True, True),
-    "no-pds": Switches("mlp", True, True),
-    "no-adf": Switches("affine", False, True),
-    "no-gpc": Switches("affine", True, False),
-    "deform-only": Switches(None, True, False),
-}
-
-
-def build_model(cfg, profile, points, colors, rng):
+def build_model(cfg, profile: MotionProfile, points, colors, rng: np.random.Generator) -> VeloGaussModel:
     """A fresh model for `cfg` (velogauss.config.Config) and the scene's `profile`.
 
     points (M, 3) / colors (M, 3) or None: the initial Gaussian centres and colours;
-    rng: NumPy Generator for the initial motion weights.
+    rng: NumPy Generator; one draw from it seeds the torch Generator of the initial motion
+    weights, so a run's seed fixes them.
     """
     m = cfg.model
     gaussians = Gaussians.from_points(points, colors, m.sh_degree, m.init_opacity)
-    return _assemble(cfg, profile, gaussians, rng)
+    generator = torch.Generator().manual_seed(int(rng.integers(2**63 - 1)))
+    return _assemble(cfg, profile, gaussians, generator)
 
 
-def model_from_state(cfg, profile, state):
+def model_from_state(cfg, profile: MotionProfile, state: dict) -> VeloGaussModel:
     """A model with the shapes of a saved `state_dict()` `state` (load it afterwards)."""
     prefix = "gaussians."
     gstate = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
     gaussians = Gaussians.empty_like_state(gstate, cfg.model.sh_degree)
-    return _assemble(cfg, profile, gaussians, np.random.default_rng(0))
+    # The drawn values are overwritten by loading; a private generator leaves torch's global
+    # random state (a resumed run's) untouched.
+    return _assemble(cfg, profile, gaussians, torch.Generator().manual_seed(0))
 
 
-def scene_profile(cfg, metadata):
+def scene_profile(cfg, metadata: dict | None) -> MotionProfile:
     """The `MotionProfile` of the config's effects for a scene with `metadata` (scene.json or None)."""
     return resolve_profile(cfg.model.effects, cfg.model.incompressible, metadata)
 
 
-def profile_from_dict(values):
+def profile_from_dict(values: dict) -> MotionProfile:
     """Inverse of `dataclasses.asdict(profile)` (lists back to tuples)."""
     return MotionProfile(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
-def _assemble(cfg, profile, gaussians, rng):
-    m = cfg.model
-    switches = ABLATION_SWITCHES[m.ablation]
-    motion = None
-    if profile.moving:
-        motion = MotionModel(motion_config(m, profile), profile, switches.velocity, switches.adf, m.integrator, m.step,
-                             rng)
-    # deform-only is a DefGS-style model: its deformation network is evaluated at every t.
-    clamp = m.adf_clamp_time and m.ablation != "deform-only"
-    return VeloGaussModel(gaussians, motion, cfg.data.max_time, adf_clamp_time=clamp)
+def _assemble(cfg, profile, gaussians, generator):
+    spec = resolve_motion_spec(cfg.model, profile, cfg.data.max_time)
+    motion = MotionParameters(spec, generator) if spec.moving else None
+    return VeloGaussModel(gaussians, motion, spec)

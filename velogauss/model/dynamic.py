@@ -1,69 +1,66 @@
 """VeloGauss: canonical Gaussians moved by the motion model, rendered at any time.
 
-At time t (paper eqs. 5-6, spec VG-TRAJ, VG-ADF, VG-ADF-COMPOSE):
-  z = E(γ(x0));  (x*, q*, s*) = base_state(x0, q0, s0, z, t);
-  (Δx, Δq, Δs) = ADF(x0, t_adf, z);  x = x* + Δx, q = q* ⊗ Δq, s = s* exp(Δs),
-with t_adf = min(t, max_time) when `adf_clamp_time` (the ADF has never seen the future).
-Only the particles flagged `moving` are integrated and deformed; the others are rendered at
-their canonical state, so the cost of motion grows with the moving part of the scene.
-Ablations: "no-adf" drops the ADF, "deform-only" drops the velocity (x* = x0: a
-DefGS-style deformation model, its ADF evaluated at every t), and a static profile builds
-no motion at all.
+The model holds the canonical `Gaussians`, the `MotionParameters` (None for a static
+scene) and the resolved `MotionSpec`; the motion itself is the pure function
+`velogauss.model.motion.gaussians_at` (paper eqs. 5-6, spec VG-TRAJ, VG-ADF,
+VG-ADF-COMPOSE). Only the particles flagged `moving` are integrated and deformed; the
+others are rendered at their canonical state, so the cost of motion grows with the moving
+part of the scene.
 """
 
 import torch
 from torch import nn
 
-from velogauss_fast.motion.deform import compose_state
-from velogauss_fast.motion.trajectory import normalize_quat
+from velogauss.model import motion as motion_fns
+from velogauss.model.spec import MotionSpec
+from velogauss_fast.quaternion import normalize_quat
 from velogauss_fast.raster import rasterize
 
 
 class VeloGaussModel(nn.Module):
     """The model that `velogauss train` learns and `eval`, `render`, `export` use.
 
-    gaussians: `Gaussians`; motion: `MotionModel` or None (static scene); max_time: end of
-    the observed window; adf_clamp_time: hold the ADF at max_time beyond it.
+    gaussians: `Gaussians`; motion: `MotionParameters` or None (static scene); spec: the
+    `MotionSpec` both were built from.
     """
 
-    def __init__(self, gaussians, motion, max_time, adf_clamp_time=True):
+    def __init__(self, gaussians, motion, spec: MotionSpec):
         super().__init__()
+        if (motion is not None) != spec.moving:
+            raise ValueError(f"motion: expected {'MotionParameters' if spec.moving else 'None'} for this spec")
         self.gaussians = gaussians
         self.motion = motion
-        self.max_time = float(max_time)
-        self.adf_clamp_time = bool(adf_clamp_time)
-        # Training switches the ADF off until it starts learning (velogauss.train.loop): its
-        # last layer starts at zero, so skipping it is then exactly the identity, and cheaper.
-        self.adf_enabled = True
+        self.spec = spec
         self.register_buffer("moving", torch.ones(len(gaussians), dtype=torch.bool))
 
     @property
-    def has_velocity(self):
+    def has_velocity(self) -> bool:
         """A velocity field moves the particles (not for static scenes or deform-only)."""
-        return self.motion is not None and self.motion.velocity_kind is not None
+        return self.spec.velocity is not None
 
     @property
-    def sh_degree(self):
+    def sh_degree(self) -> int:
         return self.gaussians.sh_degree
 
-    def state_at(self, t):
-        """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t."""
+    def motion_params(self) -> dict | None:
+        """The motion parameter dict (`MotionParameters.params`), None for a static scene."""
+        return None if self.motion is None else self.motion.params()
+
+    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None):
+        """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t.
+
+        params: the motion parameter dict, when the caller already built it this step;
+        spec: a variant of the model's spec (training skips the ADF before it learns).
+        """
+        spec = self.spec if spec is None else spec
         g = self.gaussians
         x0, q0, s0 = g.means, normalize_quat(g.quats), g.scales
-        if self.motion is None or not bool(self.moving.any()):
+        if not spec.moving or not bool(self.moving.any()):
             return x0, q0, s0, x0
+        params = self.motion.params() if params is None else params
         idx = torch.nonzero(self.moving).squeeze(1)
-        x0m, q0m, s0m = x0.index_select(0, idx), q0.index_select(0, idx), s0.index_select(0, idx)
-        z = self.motion.codes(x0m)
-        if self.has_velocity:
-            xs, qs, ss = self.motion.base_state(x0m, q0m, s0m, z, t)
-        else:
-            xs, qs, ss = x0m, q0m, s0m
-        x, q, s = xs, normalize_quat(qs), ss
-        if self.motion.use_adf and self.adf_enabled:
-            t_adf = min(float(t), self.max_time) if self.adf_clamp_time else t
-            dx, dq, ds = self.motion.adf_residual(x0m, t_adf, z)
-            x, q, s = compose_state(xs, qs, ss, dx, dq, ds)
+        x, q, s, xs = motion_fns.gaussians_at(params, spec, x0.index_select(0, idx), q0.index_select(0, idx),
+                                              s0.index_select(0, idx), t)
         return (x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s),
                 x0.index_copy(0, idx, xs))
 
@@ -79,14 +76,12 @@ class VeloGaussModel(nn.Module):
         return {"means": means, "quats": quats, "scales": scales, "opacities": g.opacities, "colors": g.sh,
                 "sh_degree": g.sh_degree}
 
-    def render(self, camera, t, background):
+    def render(self, camera, t, background, spec: MotionSpec | None = None):
         """Render `camera` (velogauss.data.Camera) at time t over `background (3,)`:
-        (image (H, W, 3), alpha (H, W, 1), meta) as `velogauss_fast.rasterize` returns them."""
-        return render_gaussians(self.gaussians_at(t), camera, background)
-
-    def base_positions(self, t):
-        """Physics-only positions x*(t) (N, 3) (VG-TRAJ, without the ADF)."""
-        return self.state_at(t)[3]
+        (image (H, W, 3), alpha (H, W, 1), meta) as `velogauss_fast.rasterize` returns them.
+        spec: as in `state_at`."""
+        means, quats, scales, _ = self.state_at(t, spec=spec)
+        return render_gaussians(self.with_appearance(means, quats, scales), camera, background)
 
     def tracked_positions(self, t):
         """Positions (N, 3) whose paths the trajectory metric and figure follow: the physics
@@ -99,15 +94,15 @@ class VeloGaussModel(nn.Module):
         """Learned Eulerian velocity (M, 3) at world points x (M, 3); zero without a velocity model."""
         if not self.has_velocity:
             return torch.zeros_like(x)
-        return self.motion.velocity_at(x, t)
+        return motion_fns.velocity_at(self.motion.params(), self.spec, x, t)
 
     def particle_velocity(self, x0, x, t):
         """Velocity (M, 3) the model gives the material points that started at x0 (M, 3) when
-        they are at x (M, 3) at time t (`MotionModel.particle_velocity`); zero without a
-        velocity model."""
+        they are at x (M, 3) at time t (`velogauss.model.motion.particle_velocity`); zero
+        without a velocity model."""
         if not self.has_velocity:
             return torch.zeros_like(x)
-        return self.motion.particle_velocity(x0, x, t)
+        return motion_fns.particle_velocity(self.motion.params(), self.spec, x0, x, t)
 
     def set_moving(self, moving):
         """Flag which particles are integrated (bool (N,))."""

@@ -1,166 +1,149 @@
-"""The motion model as a trainable module: physics code, velocity, acceleration, ADF.
+"""The motion of a model: its parameters as a module, and pure functions of (params, spec).
 
-Holds the motion parameter dict of spec/motion.md as parameters and evaluates it with
-`velogauss_fast` (VG-CODE ... VG-DIV). What is built follows the scene's
-`MotionProfile` and the ablation (paper Table "ablation"):
+`MotionParameters` holds the motion parameter dict of spec/motion.md as trainable
+parameters and does nothing else; `params()` returns the dict, built once per training step.
+Everything the motion computes is a pure function of that dict and the resolved
+`MotionSpec` (velogauss.model.spec), evaluated with `velogauss_fast` (VG-CODE ... VG-DIV):
 
-- velocity "affine" (PDS on): Φ(x) w(t, z) over the profile's basis columns, with the
-  VG-ROTSCALE rule moving rotations and scales; "mlp" (PDS off, "no-pds"): an
-  unconstrained MLP v(γ(x), t) that moves positions only (the paper's replacement),
-  integrated the same way; None ("deform-only"): no velocity at all.
-- the acceleration polynomial Q only when the profile accelerates;
-- the ADF network only when the ablation keeps it.
+- `gaussians_at`: the Gaussians at time t (the spec's scheme, then the ADF residual);
+- `velocity_at`, `particle_velocity`: the learned velocities (Eulerian, and along paths);
+- `motion_residuals`: the physics residuals of the training loss.
+
+What is built follows the spec: the velocity's time network ("affine", PDS) or the
+unconstrained velocity MLP ("mlp", no-pds) or neither (deform-only); the acceleration
+polynomial Q only when the profile accelerates; the ADF only when the ablation keeps it.
 """
 
 import torch
 from torch import nn
-from torch.func import jvp
 
-from velogauss.config import INTEGRATORS
+from velogauss.model.spec import MotionSpec
+from velogauss_core.constants import ACC_POLY_DEGREE
+from velogauss_core.motion import N_BASIS, network_shapes
 from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.deform import adf_residual
-from velogauss_fast.motion.integrate import integrate
-from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.motion.coefficients import coefficients
-from velogauss_fast.motion.velocity import velocity, velocity_field
-from velogauss_fast.nn import mlp, positional_encoding
-from velogauss_fast.physics.acceleration import acceleration_field
-from velogauss_fast.physics.residuals import physics_residuals, transport_residual
-from velogauss_ref.constants import ACC_POLY_DEGREE
-from velogauss_ref.motion.config import MotionConfig, init_motion_params, mlp_layers
+from velogauss_fast.motion.deform import adf_residual, compose_state
+from velogauss_fast.motion.integrate import integrate
+from velogauss_fast.motion.params import init_motion_params, mlp_layers
+from velogauss_fast.motion.trajectory import base_state
+from velogauss_fast.motion.velocity import mlp_velocity, velocity, velocity_field
+from velogauss_fast.physics.residuals import mlp_residuals, physics_residuals, transport_residual
 
 
-VELOCITY_KINDS = ("affine", "mlp", None)
+class MotionParameters(nn.Module):
+    """The trainable motion parameters of a moving scene, laid out as `spec` says.
 
-
-class MotionModel(nn.Module):
-    """Velocity, acceleration and auxiliary deformation of one scene (see the module docstring).
-
-    motion_cfg: `MotionConfig` (sizes and the profile's masks); profile: `MotionProfile`;
-    velocity: one of VELOCITY_KINDS; adf: build the ADF; integrator in INTEGRATORS and
-    step > 0 (VG-INTEG); rng: NumPy Generator for the initial weights (`init_motion_params`).
+    Attributes (each a ParameterList of W, b, W, b, ...): code (VG-CODE), mix (VG-COEF),
+    time (VG-COEF, velocity "affine"), velocity_mlp (velocity "mlp"), adf (VG-ADF); acc
+    (VG-ACC's Q, a Parameter) when the spec accelerates. generator: torch Generator of the
+    initial weights (`velogauss_fast.motion.params.init_motion_params`).
     """
 
-    def __init__(self, motion_cfg, profile, velocity, adf, integrator, step, rng):
+    def __init__(self, spec: MotionSpec, generator: torch.Generator | None = None):
         super().__init__()
-        if velocity not in VELOCITY_KINDS:
-            raise ValueError(f"velocity: expected one of {VELOCITY_KINDS}, got {velocity!r}")
-        if integrator not in INTEGRATORS:
-            raise ValueError(f"integrator: expected one of {INTEGRATORS}, got {integrator!r}")
-        self.cfg, self.profile = motion_cfg, profile
-        self.velocity_kind, self.use_adf = velocity, bool(adf)
-        self.integrator, self.step = integrator, float(step)
-        params = init_motion_params(rng, motion_cfg)
+        if not spec.moving:
+            raise ValueError("spec: a static scene has no motion parameters (spec.moving is False)")
+        self.spec = spec
+        cfg = spec.config
+        params = init_motion_params(cfg, generator)
         self.code = _parameter_list(params["code"])
         self.mix = _parameter_list(params["mix"])
-        if velocity == "affine":
+        if spec.velocity == "affine":
             self.time = _parameter_list(params["time"])
-        elif velocity == "mlp":
-            self.velocity_mlp = _parameter_list(_velocity_mlp_layers(rng, motion_cfg))
-        if profile.acceleration:
-            self.acc = nn.Parameter(torch.tensor(params["acc"], dtype=torch.float32))
-        if self.use_adf:
+        elif spec.velocity == "mlp":
+            d_in, d_out = network_shapes(cfg)["velocity_mlp"]
+            # Last layer zero: a still start, like the affine velocity's time network.
+            self.velocity_mlp = _parameter_list(mlp_layers(d_in, d_out, cfg.hidden, cfg.depth, generator,
+                                                           zero_last=True))
+        if spec.acceleration:
+            self.acc = nn.Parameter(params["acc"])
+        if spec.adf:
             self.adf = _parameter_list(params["adf"])
 
-    def params(self):
+    def params(self) -> dict:
         """The spec's parameter dict; a scene without acceleration gets Q = 0 (a ≡ 0), not a parameter."""
+        spec = self.spec
         ref = self.code[0]
-        acc = self.acc if self.profile.acceleration else ref.new_zeros(ACC_POLY_DEGREE + 1, self.cfg.n_patterns, 12)
+        acc = self.acc if spec.acceleration else ref.new_zeros(ACC_POLY_DEGREE + 1, spec.config.n_patterns, N_BASIS)
         out = {"code": _layers(self.code), "mix": _layers(self.mix), "acc": acc}
-        if self.pds:
-            out["time"] = _layers(self.time)
-        if self.use_adf:
-            out["adf"] = _layers(self.adf)
+        for name in ("time", "velocity_mlp", "adf"):
+            if hasattr(self, name):
+                out[name] = _layers(getattr(self, name))
         return out
 
-    @property
-    def pds(self):
-        """The particle dynamics system (affine velocity) is on."""
-        return self.velocity_kind == "affine"
 
-    def codes(self, x0):
-        """Physics codes z (N, L) of canonical positions x0 (N, 3) (VG-CODE)."""
-        return physics_code(self.params(), x0, self.cfg)
+def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tensor, s0: torch.Tensor, t):
+    """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t of the
+    Gaussians whose canonical state is x0 (N, 3), q0 (N, 4) unit, s0 (N, 3) > 0.
 
-    def base_state(self, x0, q0, s0, z, t):
-        """(x*, q*, s*) at time t by integration from t = 0 (VG-TRAJ); shapes as x0, q0, s0.
+    Paper eqs. 5-6 (VG-TRAJ, VG-ADF, VG-ADF-COMPOSE): z = E(γ(x0)); the base state
+    (x*, q*, s*) by the spec's scheme; x = x* + Δx, q = q* ⊗ Δq, s = s* exp(Δs) with
+    (Δx, Δq, Δs) = ADF(x0, t_adf, z) when spec.adf, t_adf = min(t, spec.adf_clamp_time).
+    Without a velocity (deform-only) x* = x0; without PDS only positions move.
+    """
+    cfg = spec.config
+    z = physics_code(params, x0, cfg)
+    if spec.scheme == "integrate":
+        xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
+    else:
+        raise ValueError(f"spec.scheme: unknown scheme {spec.scheme!r}")
+    if not spec.adf:
+        return xs, qs, ss, xs
+    t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
+    dx, dq, ds = adf_residual(params, x0, t_adf, z, cfg)
+    x, q, s = compose_state(xs, qs, ss, dx, dq, ds)
+    return x, q, s, xs
 
-        Without PDS only positions move (the MLP velocity has no rotation or strain rule).
-        """
-        if self.pds:
-            return base_state(self.params(), x0, q0, s0, z, t, self.step, self.integrator, self.cfg)
-        x = integrate(lambda y, tau: self._mlp_velocity(y, tau), x0, 0.0, t, self.step, self.integrator)
+
+def velocity_at(params: dict, spec: MotionSpec, x: torch.Tensor, t) -> torch.Tensor:
+    """The Eulerian velocity v(x, t) (N, 3) at world points x (N, 3) (VG-FIELD, or the MLP's
+    VG-VEL-MLP); zero without a velocity."""
+    if spec.velocity == "affine":
+        return velocity_field(params, x, t, spec.config)
+    if spec.velocity == "mlp":
+        return mlp_velocity(params, x, t, spec.config)
+    return torch.zeros_like(x)
+
+
+def particle_velocity(params: dict, spec: MotionSpec, x0: torch.Tensor, x: torch.Tensor, t) -> torch.Tensor:
+    """Velocity (N, 3) of the particles that started at x0 (N, 3), when at x (N, 3) at time t:
+    Φ(x) w(t, E(γ(x0))), the code frozen at the start as along a path (VG-VEL, VG-TRAJ).
+    Without PDS the velocity MLP has no code: the Eulerian field at x. Zero without a velocity."""
+    if spec.velocity == "affine":
+        cfg = spec.config
+        return velocity(x, coefficients(params, t, physics_code(params, x0, cfg), cfg))
+    return velocity_at(params, spec, x, t)
+
+
+def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):
+    """(transport residual (N, 3), divergence (N,) or None) at collocation points x (N, 3).
+
+    VG-TRANSPORT (VG-TRANSPORT-MLP without PDS) and VG-DIV; the divergence is computed only
+    when spec.divergence (the transport residual alone needs one JVP instead of three).
+    """
+    cfg = spec.config
+    if spec.velocity == "affine":
+        if spec.divergence:
+            return physics_residuals(params, x, t, cfg)
+        return transport_residual(params, x, t, cfg), None
+    if spec.velocity == "mlp":
+        return mlp_residuals(params, x, t, cfg, with_divergence=spec.divergence)
+    raise ValueError("spec.velocity: a model without velocity has no physics residuals")
+
+
+def _integrated_state(params, spec, x0, q0, s0, z, t):
+    """Scheme "integrate": (x*, q*, s*) by integration from t = 0 (VG-TRAJ)."""
+    if spec.velocity == "affine":
+        return base_state(params, x0, q0, s0, z, t, spec.step, spec.integrator, spec.config)
+    if spec.velocity == "mlp":
+        x = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec.config), x0, 0.0, t, spec.step,
+                      spec.integrator)
         return x, q0, s0
-
-    def adf_residual(self, x0, t, z):
-        """(dx, dq, ds) of the auxiliary deformation field (VG-ADF)."""
-        return adf_residual(self.params(), x0, t, z, self.cfg)
-
-    def velocity_at(self, x, t):
-        """The Eulerian velocity v(x, t) (N, 3) at world points x (N, 3) (VG-FIELD, or the MLP)."""
-        if self.pds:
-            return velocity_field(self.params(), x, t, self.cfg)
-        return self._mlp_velocity(x, t)
-
-    def particle_velocity(self, x0, x, t):
-        """Velocity (N, 3) of the particles that started at x0 (N, 3), when at x (N, 3) at time t:
-        Φ(x) w(t, E(γ(x0))), the code frozen at the start as along a path (VG-VEL, VG-TRAJ).
-        Without PDS the velocity MLP has no code: the Eulerian field at x."""
-        if self.pds:
-            return velocity(x, coefficients(self.params(), t, self.codes(x0), self.cfg))
-        return self._mlp_velocity(x, t)
-
-    def residuals(self, x, t, divergence):
-        """(transport residual (N, 3), divergence (N,) or None) at collocation points x (N, 3).
-
-        VG-TRANSPORT and VG-DIV; the divergence is computed only when asked for (the
-        transport residual alone needs one JVP instead of three).
-        """
-        if self.pds:
-            if divergence:
-                return physics_residuals(self.params(), x, t, self.cfg)
-            return transport_residual(self.params(), x, t, self.cfg), None
-        return self._mlp_residuals(x, t, divergence)
-
-    def _mlp_velocity(self, x, t):
-        t_col = torch.as_tensor(t, dtype=x.dtype, device=x.device).reshape(1, 1).expand(x.shape[0], 1)
-        return self._mlp_velocity_xt(x, t_col)
-
-    def _mlp_velocity_xt(self, x, t_col):
-        return mlp(_layers(self.velocity_mlp), torch.cat([positional_encoding(x, self.cfg.n_freqs_x), t_col], dim=-1))
-
-    def _mlp_residuals(self, x, t, divergence):
-        # The MLP acts on each point alone, so one batched JVP gives every point's
-        # directional derivative at once: along t for dv/dt, along v for (grad v) v.
-        t_col = torch.full((x.shape[0], 1), float(t), dtype=x.dtype, device=x.device)
-        v, dv_dt = jvp(lambda s: self._mlp_velocity_xt(x, s), (t_col,), (torch.ones_like(t_col),))
-        _, grad_v_v = jvp(lambda y: self._mlp_velocity_xt(y, t_col), (x,), (v,))
-        r = dv_dt + grad_v_v - acceleration_field(self.params(), x, t, self.cfg)
-        div = None
-        if divergence:
-            div = sum(jvp(lambda y: self._mlp_velocity_xt(y, t_col), (x,), (e.expand_as(x),))[1][:, k]
-                      for k, e in enumerate(torch.eye(3, dtype=x.dtype, device=x.device)))
-        return r, div
-
-
-def motion_config(model_cfg, profile):
-    """The `MotionConfig` of a training `ModelConfig` and a scene's `MotionProfile`."""
-    sizes = {name: getattr(model_cfg, name) for name in _NETWORK_SIZES}
-    return MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask)
-
-
-# The MotionConfig fields that ModelConfig carries under the same names.
-_NETWORK_SIZES = ("n_freqs_x", "n_freqs_t", "n_freqs_adf_x", "n_freqs_adf_t", "code_dim", "n_patterns", "hidden",
-                  "depth")
-
-
-def _velocity_mlp_layers(rng, cfg):
-    """v(γ(x), t): 3 (1 + 2 n_freqs_x) + 1 -> hidden^depth -> 3, last layer zero (a still start)."""
-    return mlp_layers(rng, 3 * (1 + 2 * cfg.n_freqs_x) + 1, cfg.hidden, cfg.depth, 3, zero_last=True)
+    return x0, q0, s0
 
 
 def _parameter_list(layers):
-    return nn.ParameterList([nn.Parameter(torch.tensor(a, dtype=torch.float32)) for pair in layers for a in pair])
+    return nn.ParameterList([nn.Parameter(a.detach().to(torch.float32)) for pair in layers for a in pair])
 
 
 def _layers(plist):

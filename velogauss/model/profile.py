@@ -1,6 +1,6 @@
 """Which physics a scene calls for: its effect profile decides what the model builds and computes.
 
-A scene declares its effects (a subset of `velogauss.scenes.EFFECTS`: translation,
+A scene declares its effects (a subset of `velogauss_core.motion.EFFECTS`: translation,
 rotation, gravity, stretch, shear, static) and whether its motion is incompressible, in
 `scene.json` or on the command line. From them:
 
@@ -19,10 +19,7 @@ rotation, gravity, stretch, shear, static) and whether its motion is incompressi
 
 from dataclasses import dataclass
 
-from velogauss_ref.motion.basis import COLUMN_GROUPS
-
-MOTION_EFFECTS = ("translation", "rotation", "stretch", "shear")
-ALL_EFFECTS = ("translation", "rotation", "gravity", "stretch", "shear", "static")
+from velogauss_core.motion import COLUMN_GROUPS, EFFECTS, MOTION_EFFECTS
 
 
 @dataclass(frozen=True)
@@ -54,10 +51,10 @@ def resolve_profile(effects, incompressible, metadata=None):
     effect and incompressible motion (what NVFi-style methods assume for real scenes).
     """
     if effects == "auto":
-        effects = tuple((metadata or {}).get("effects", ALL_EFFECTS))
+        effects = tuple((metadata or {}).get("effects", EFFECTS))
     if incompressible == "auto":
         incompressible = bool((metadata or {}).get("incompressible", True))
-    effects = tuple(e for e in ALL_EFFECTS if e in effects)
+    effects = tuple(e for e in EFFECTS if e in effects)
     groups = {e for e in effects if e in MOTION_EFFECTS}
     if groups or "gravity" in effects:
         groups.add("translation")

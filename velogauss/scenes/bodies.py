@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from velogauss.scenes.motions import Motion, motion_from_dict
-from velogauss_ref.checks import check_array
-from velogauss_ref.constants import POSE_ORTHONORMAL_TOL
+from velogauss_core.checks import check_array
+from velogauss_core.constants import POSE_ORTHONORMAL_TOL
 
 PRIMITIVES = ("ellipsoid", "box", "plane")
 TEXTURES = ("checker", "stripes", "gradient")

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from velogauss_ref.checks import check_array, check_scalar
+from velogauss_core.checks import check_array, check_scalar
 
 
 def _vec(name, value):

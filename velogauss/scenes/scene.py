@@ -14,9 +14,8 @@ import numpy as np
 
 from velogauss.scenes.bodies import body_from_dict
 from velogauss.scenes.raycast import render_rgba, shade, world_normal
-from velogauss_ref.checks import check_array, check_scalar
-
-EFFECTS = ("translation", "rotation", "gravity", "stretch", "shear", "static")
+from velogauss_core.checks import check_array, check_scalar
+from velogauss_core.motion import EFFECTS
 
 
 class AnalyticScene:

@@ -25,9 +25,10 @@ from tqdm.auto import tqdm
 
 from velogauss.config import to_toml
 from velogauss.io_utils import write_text
-from velogauss.model import ABLATION_SWITCHES, build_model, model_from_state, scene_profile
+from velogauss.model import build_model, model_from_state, scene_profile
 from velogauss.model.build import profile_from_dict
 from velogauss.model.dynamic import render_gaussians
+from velogauss.model.motion import motion_residuals
 from velogauss.train.checkpoint import load_checkpoint, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.optim import make_optimizer, set_learning_rates
@@ -35,7 +36,7 @@ from velogauss.train.sampling import FrameSampler, camera_extent, collocation_po
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.losses import photometric_loss, physics_loss
 from velogauss_fast.metrics import psnr
-from velogauss_ref.constants import STATIC_MOTION_PX
+from velogauss_core.constants import STATIC_MOTION_PX
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
 # a stable mean, few enough that an evaluation costs a fraction of a second.
@@ -92,16 +93,18 @@ class _Loop:
         self.cfg, self.data, self.run_dir = cfg, data, run_dir
         self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile
         self.rng, self.extent, self.extra, self.device = rng, extent, extra, device
-        self.switches = ABLATION_SWITCHES[cfg.model.ablation]
+        # What the motion computes and which losses are on, resolved once when the model was built.
+        self.spec = model.spec
         self.images = [torch.as_tensor(f.image, device=device) for f in data.train]
         # The distinct training cameras (multi-view video repeats each pose at every time).
         self.cameras = list({(f.camera.viewmat.tobytes(), f.camera.K.tobytes()): f.camera for f in data.train}.values())
         self.sampler = FrameSampler([f.time for f in data.train], cfg.train.warmup, cfg.train.curriculum,
-                                    model.motion is not None)
+                                    self.spec.moving)
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
         # deform-only has no velocity to learn first: its ADF is the motion and starts with it.
-        default_start = cfg.train.warmup if not model.has_velocity else cfg.train.warmup + cfg.train.curriculum
+        has_velocity = self.spec.velocity is not None
+        default_start = cfg.train.warmup + cfg.train.curriculum if has_velocity else cfg.train.warmup
         self.adf_start = default_start if cfg.train.adf_start < 0 else cfg.train.adf_start
 
     def run(self, start, progress):
@@ -130,7 +133,6 @@ class _Loop:
                     raise KeyboardInterrupt(f"training interrupted; checkpoint at iteration {done} in {self.run_dir}")
         if start >= cfg.iterations:
             bar.close()
-        self.model.adf_enabled = True
 
     def step(self, it):
         """One optimisation step; returns (loss, PSNR of the rendered view)."""
@@ -138,17 +140,20 @@ class _Loop:
         set_learning_rates(self.optimizer, it, cfg.train, self.extent)
         index = self.sampler.sample(it, self.rng)
         frame, gt = self.data.train[index], self.images[index]
-        motion_on = model.motion is not None and it >= cfg.train.warmup
-        if model.motion is not None:
+        spec = self.spec_at(it)
+        motion_on = spec.moving and it >= cfg.train.warmup
+        params = None
+        if spec.moving:
             self.freeze_motion(it)
-        means, quats, scales, base = model.state_at(frame.time)
+            params = model.motion.params()  # once per step: the render and the physics loss share it
+        means, quats, scales, base = model.state_at(frame.time, params, spec)
         image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
         meta["mean2d"].retain_grad()
         loss = photometric_loss(image, gt)
-        if motion_on and model.has_velocity and model.motion.use_adf:
+        if motion_on and self.spec.adf_loss:
             loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
-        if motion_on and self.switches.gpc and model.has_velocity:
-            loss = loss + self.physics_loss(it)
+        if motion_on and spec.physics_loss:
+            loss = loss + self.physics_loss(it, params, spec)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad = meta["mean2d"].grad
@@ -159,6 +164,11 @@ class _Loop:
             frame_psnr = float(psnr(image.detach().clamp(0, 1), gt))
         return float(loss.detach()), frame_psnr
 
+    def spec_at(self, it):
+        """The model's spec at iteration `it`: without the ADF before `adf_start` (its last
+        layer is still zero, so skipping it is exactly the identity, and cheaper)."""
+        return self.spec if not self.spec.adf or it >= self.adf_start else self.spec.without_adf()
+
     def freeze_motion(self, it):
         """Motion networks train from the warm-up's end, the ADF from `adf_start` (default: once
         the curriculum has opened the whole window, so the velocity, not the ADF, learns the
@@ -167,24 +177,22 @@ class _Loop:
         Frozen parameters get no gradient at all: a zero gradient would still advance Adam's
         step count, and its bias correction would later inflate their first real updates.
         """
-        t = self.cfg.train
         motion = self.model.motion
-        motion.requires_grad_(it >= t.warmup)
-        if motion.use_adf:
-            adf_on = it >= self.adf_start
-            motion.adf.requires_grad_(adf_on)
-            self.model.adf_enabled = adf_on
+        motion.requires_grad_(it >= self.cfg.train.warmup)
+        if self.spec.adf:
+            motion.adf.requires_grad_(it >= self.adf_start)
 
-    def physics_loss(self, it):
-        """Ramped VG-LOSS-PHYS on fresh collocation points."""
+    def physics_loss(self, it, params, spec):
+        """Ramped VG-LOSS-PHYS on fresh collocation points (motion parameter dict `params`)."""
         p = self.cfg.physics
         ramp = min(1.0, (it - self.cfg.train.warmup + 1) / max(1, p.ramp))
         x, t = collocation_points(self.data.bounds, p.bounds_margin, p.n_points, self.rng, torch.float32, self.device)
-        r, div = self.model.motion.residuals(x, t, divergence=self.profile.divergence)
+        r, div = motion_residuals(params, spec, x, t)
         return physics_loss(r, div, ramp * p.lambda_transport, ramp * p.lambda_div)
 
     def maintain(self, done):
-        """Density control, opacity resets and static detection due after `done` iterations."""
+        """Density control, opacity resets and static detection due after `done` iterations
+        (the ADF as the next iteration will run it)."""
         d, model = self.cfg.densify, self.model
         if d.start < done <= d.until and done % d.every == 0:
             densify_and_prune(model, self.optimizer, self.stats, d, self.extent, self.extra["after_reset"],
@@ -193,15 +201,16 @@ class _Loop:
             reset_opacity(model, self.optimizer)
             self.extra["after_reset"] = True
         window_open = done >= self.cfg.train.warmup + self.cfg.train.curriculum
-        if model.motion is not None and d.static_every and window_open and done % d.static_every == 0:
+        if self.spec.moving and d.static_every and window_open and done % d.static_every == 0:
             with torch.no_grad():
                 threshold = STATIC_MOTION_PX * pixel_footprint(model.gaussians.means, self.cameras)
-            model.set_moving(detect_moving(model, self.cfg.data.max_time, threshold))
+            model.set_moving(detect_moving(model, self.cfg.data.max_time, threshold, self.spec_at(done - 1)))
 
     def log_eval(self, done, loss_value, train_psnr, elapsed):
         """Append one evaluation record to log.jsonl."""
         with torch.no_grad():
-            scores = [float(psnr(self.model.render(f.camera, f.time, self.background)[0].clamp(0, 1),
+            spec = self.spec_at(done - 1)
+            scores = [float(psnr(self.model.render(f.camera, f.time, self.background, spec)[0].clamp(0, 1),
                                  torch.as_tensor(f.image, device=self.device))) for f in self.eval_frames]
         record = {"iteration": done, "loss": loss_value, "train_psnr": train_psnr,
                   "interp_psnr": float(np.mean(scores)) if scores else None,

@@ -27,7 +27,7 @@ def make_optimizer(model, train_cfg, extent):
            "opacity_logits": t.lr_opacity, "sh_dc": t.lr_sh, "sh_rest": t.lr_sh / 20.0}
     groups = [{"params": [getattr(model.gaussians, name)], "lr": lrs[name], "name": name} for name in FIELDS]
     if model.motion is not None:
-        acc = [model.motion.acc] if model.motion.profile.acceleration else []
+        acc = [model.motion.acc] if model.spec.acceleration else []
         networks = [p for p in model.motion.parameters() if all(p is not a for a in acc)]
         groups.append({"params": networks, "lr": t.lr_motion, "name": "motion"})
         if acc:

@@ -13,7 +13,8 @@ too early moves again at the next detection once the shared motion networks say 
 import numpy as np
 import torch
 
-from velogauss_ref.constants import NEAR_PLANE
+from velogauss_core.constants import NEAR_PLANE
+from velogauss_fast.quaternion import normalize_quat
 
 # Probe times: the observed window [0, max_time] at this many evenly spaced points.
 _PROBES = 5
@@ -32,18 +33,20 @@ def pixel_footprint(points, cameras):
     return best
 
 
-def detect_moving(model, max_time, threshold):
+def detect_moving(model, max_time, threshold, spec=None):
     """bool (N,): particles whose motion bound exceeds `threshold` (world units: a number, or
-    a tensor (N,) per particle) somewhere in [0, max_time]. Leaves `model.moving` unchanged."""
+    a tensor (N,) per particle) somewhere in [0, max_time], under `spec` (default the
+    model's; see `VeloGaussModel.state_at`). Leaves `model.moving` unchanged."""
     g = model.gaussians
     saved = model.moving
     with torch.no_grad():
         model.set_moving(torch.ones_like(saved))
         x0, s0 = g.means, g.scales
-        q0 = torch.nn.functional.normalize(g.quats, dim=1)
+        q0 = normalize_quat(g.quats)
         bound = torch.zeros(len(g), dtype=x0.dtype, device=x0.device)
+        params = model.motion_params()
         for t in torch.linspace(0.0, max_time, _PROBES).tolist():
-            x, q, s, _ = model.state_at(t)
+            x, q, s, _ = model.state_at(t, params, spec)
             angle = 2 * torch.acos((q * q0).sum(1).abs().clamp(max=1.0))
             step = (x - x0).norm(dim=1) + s0.max(dim=1).values * angle + (s - s0).abs().max(dim=1).values
             bound = torch.maximum(bound, step)

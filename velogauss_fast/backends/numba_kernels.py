@@ -23,7 +23,7 @@ import math
 
 import numba
 
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 # Columns of `prm`: velogauss_fast.raster.SPAN_COLUMNS (mean, conic, opacity, row spans),
 # then the colour.

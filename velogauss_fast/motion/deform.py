@@ -8,9 +8,8 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.scalars import check_time, time_tensor
-from velogauss_fast.motion.trajectory import normalize_quat
 from velogauss_fast.nn import _encode, _mlp
-from velogauss_fast.quaternion import quat_multiply
+from velogauss_fast.quaternion import normalize_quat, quat_multiply
 
 
 def adf_residual(params, x0, t, z, cfg):

@@ -19,8 +19,8 @@ import torch
 
 from velogauss_fast.motion.basis import _affine
 from velogauss_fast.quaternion import quat_multiply
-from velogauss_ref.motion.basis import COLUMN_GROUPS
-from velogauss_ref.motion.config import N_BASIS
+from velogauss_core.motion import COLUMN_GROUPS
+from velogauss_core.motion import N_BASIS
 
 # Positions of the parts of u = [x | 1 | q] in the full generators.
 SLOTS = {"x": (0, 1, 2), "1": (3,), "q": (4, 5, 6, 7)}

@@ -27,9 +27,9 @@ import numpy as np
 import torch
 
 from velogauss_fast.motion.generators import SLOTS, block_generator, rotmat_form, strain_generator
-from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
-from velogauss_ref.motion.basis import COLUMN_GROUPS
-from velogauss_ref.motion.config import N_BASIS
+from velogauss_core.constants import QUAT_ZERO_NORM_SQ
+from velogauss_core.motion import COLUMN_GROUPS
+from velogauss_core.motion import N_BASIS
 
 # Column groups in VG-BASIS order, so a mask's active columns, ascending, come group by group.
 GROUP_COLUMNS = {

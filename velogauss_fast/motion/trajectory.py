@@ -10,7 +10,7 @@ from velogauss_fast.motion.coefficients import _mixing, _patterns_at
 from velogauss_fast.motion.integrate import integrate, stage_times
 from velogauss_fast.motion.rates import axis_products, rate_plan, rotmat, state_rates
 from velogauss_fast.motion.scalars import check_time, times_tensor
-from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
+from velogauss_fast.quaternion import normalize_quat
 
 
 def base_state(params, x0, q0, s0, z, t, h, method, cfg):
@@ -69,13 +69,3 @@ def _stage_coefficients(params, z, taus, columns, cfg):
     index = torch.tensor(columns, dtype=torch.long, device=m.device)
     P = P.index_select(2, index).transpose(1, 2).reshape(len(taus) * len(columns), m.shape[1])  # [S a, K]
     return (P @ m.T).split(len(columns))
-
-
-def normalize_quat(q):
-    """q / |q| for q: (..., 4); |q|^2 < QUAT_ZERO_NORM_SQ gives (1, 0, 0, 0) with zero gradient."""
-    n2 = (q * q).sum(-1, keepdim=True)
-    zero = n2 < QUAT_ZERO_NORM_SQ
-    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=q.dtype, device=q.device)
-    # Divide a stand-in where q is ~0 so that neither pass of the discarded branch sees 0/0.
-    q_safe = torch.where(zero, identity, q)
-    return q_safe / torch.sqrt(torch.where(zero, torch.ones_like(n2), n2))

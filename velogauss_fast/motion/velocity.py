@@ -1,13 +1,16 @@
-"""Particle velocity Phi(x) w and the Eulerian velocity field v(x, t), in torch.
+"""Particle velocity Phi(x) w, the Eulerian velocity field v(x, t) and the no-pds MLP velocity, in torch.
 
-Twin of `velogauss_ref.motion.velocity` (spec/motion.md, VG-VEL and VG-FIELD).
+Twin of `velogauss_ref.motion.velocity` (spec/motion.md, VG-VEL, VG-FIELD and VG-VEL-MLP).
 """
+
+import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.basis import _affine
 from velogauss_fast.motion.code import _code
 from velogauss_fast.motion.coefficients import _coefficients
-from velogauss_fast.motion.scalars import check_time
+from velogauss_fast.motion.scalars import check_time, time_tensor
+from velogauss_fast.nn import _encode, _mlp
 
 
 def velocity(x, w):
@@ -40,3 +43,20 @@ def _velocity(x, w):
 
 def _velocity_field(params, x, t, cfg):
     return _velocity(x, _coefficients(params, t, _code(params, x, cfg), cfg))
+
+
+def mlp_velocity(params, x, t, cfg):
+    """v(x, t) = MLP_v([gamma(x), t]): the unconstrained velocity of the "no-pds" ablation (VG-VEL-MLP).
+
+    params: dict with "velocity_mlp" (layers 3 (1 + 2 cfg.n_freqs_x) + 1 -> hidden^depth -> 3);
+    x: (N, 3) points; t: scalar time (number or 0-d tensor); cfg: MotionConfig -> v: (N, 3).
+    No code, no basis: it moves positions only (the paper's replacement of the PDS).
+    """
+    check_array("x", x, (None, 3))
+    check_time("t", t)
+    return _mlp_velocity(params, x, time_tensor(t, x).reshape(1, 1).expand(x.shape[0], 1), cfg)
+
+
+def _mlp_velocity(params, x, t_col, cfg):
+    """`mlp_velocity` at x (N, 3) with one time per point, t_col (N, 1)."""
+    return _mlp(params["velocity_mlp"], torch.cat([_encode(x, cfg.n_freqs_x), t_col], dim=-1))

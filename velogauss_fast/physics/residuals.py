@@ -1,6 +1,7 @@
 """Transport and divergence residuals of the Eulerian velocity field, in torch.
 
-Twin of `velogauss_ref.physics.residuals` (spec/physics.md, VG-TRANSPORT and VG-DIV).
+Twin of `velogauss_ref.physics.residuals` (spec/physics.md, VG-TRANSPORT, VG-DIV and
+VG-TRANSPORT-MLP).
 
 The reference differentiates v(x, t) = Phi(x) w(t, E(gamma(x))) with reverse mode, one
 point at a time. Here the whole batch is done at once from the structure of v:
@@ -21,8 +22,8 @@ from velogauss_fast.motion.basis import _affine
 from velogauss_fast.motion.code import _code
 from velogauss_fast.motion.coefficients import _masked, _mixing, _patterns
 from velogauss_fast.motion.scalars import check_time, time_tensor
-from velogauss_fast.motion.velocity import _velocity
-from velogauss_fast.physics.acceleration import _acceleration
+from velogauss_fast.motion.velocity import _mlp_velocity, _velocity
+from velogauss_fast.physics.acceleration import _acceleration, acceleration_field
 
 
 def transport_residual(params, x, t, cfg):
@@ -99,3 +100,26 @@ def _patterns_and_rate(params, t, cfg, like):
     """P(t) and dP/dt (both (K, 12)) from one JVP of the time network."""
     t0 = time_tensor(t, like).reshape(())
     return jvp(lambda s: _patterns(params, s, cfg), (t0,), (torch.ones_like(t0),))
+
+
+def mlp_residuals(params, x, t, cfg, with_divergence=False):
+    """Transport residual (N, 3) and divergence (N,) or None of the no-pds MLP velocity (VG-TRANSPORT-MLP).
+
+    The velocity is VG-VEL-MLP's, v = MLP_v([gamma(x), t]), at each collocation point.
+
+    params: dict with "velocity_mlp", "code", "mix" and "acc"; x: (N, 3); t: scalar time;
+    cfg: MotionConfig; with_divergence: also return div v (VG-DIV), else None. The MLP acts on
+    each point alone, so one batched JVP gives every point's directional derivative at once:
+    along t for dv/dt, along v for (grad v) v, along each axis for the divergence.
+    """
+    check_array("x", x, (None, 3))
+    check_time("t", t)
+    t_col = time_tensor(t, x).reshape(1, 1).repeat(x.shape[0], 1)  # its own memory: jvp's tangent is per row
+    v, dv_dt = jvp(lambda s: _mlp_velocity(params, x, s, cfg), (t_col,), (torch.ones_like(t_col),))
+    _, grad_v_v = jvp(lambda y: _mlp_velocity(params, y, t_col, cfg), (x,), (v,))
+    r = dv_dt + grad_v_v - acceleration_field(params, x, t, cfg)
+    if not with_divergence:
+        return r, None
+    div = sum(jvp(lambda y: _mlp_velocity(params, y, t_col, cfg), (x,), (e.expand_as(x),))[1][:, k]
+              for k, e in enumerate(torch.eye(3, dtype=x.dtype, device=x.device)))
+    return r, div

@@ -8,15 +8,6 @@ import autograd.numpy as np
 
 from velogauss_ref.checks import check_array
 
-# Zero-based columns of Phi selected by each effect of a scene's profile (VG-BASIS,
-# "Column masks"); a column mask is the union of the groups a scene declares.
-COLUMN_GROUPS = {
-    "translation": (0, 1, 2),
-    "rotation": (3, 4, 5),
-    "stretch": (6, 7, 8),
-    "shear": (9, 10, 11),
-}
-
 
 def basis_matrix(x):
     """Phi(x): the 12 basis velocity fields evaluated at x, one per column (VG-BASIS).

@@ -7,7 +7,7 @@ import autograd.numpy as np
 import numpy as onp
 
 from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.motion.config import N_BASIS
+from velogauss_core.motion import N_BASIS
 from velogauss_ref.nn import mlp, positional_encoding
 
 

@@ -1,63 +1,22 @@
-"""Hyper-parameters and parameter layout of the motion model (spec/motion.md, "Parameters
-and configuration").
+"""The motion parameter dict drawn with NumPy (spec/motion.md, "Parameters and configuration").
 
-One frozen `MotionConfig` is shared by `velogauss_ref` and `velogauss_fast`; the parameters
-are one dict of plain arrays (`init_motion_params`), which `velogauss_fast.motion.params`
-turns into tensors of the same structure.
+`MotionConfig` and the layout's sizes live in `velogauss_core.motion`; this is the
+reference's initialisation, which `velogauss_fast.motion.params.init_motion_params` mirrors
+in torch.
 """
-
-from dataclasses import dataclass
 
 import numpy as onp
 
-from velogauss_ref.constants import ACC_POLY_DEGREE
-
-N_BASIS = 12
-# (dx 3, dq 4, ds 3) of VG-ADF.
-ADF_OUTPUTS = 10
-
-
-@dataclass(frozen=True)
-class MotionConfig:
-    """Sizes of the motion networks and the basis-column masks (spec/motion.md).
-
-    n_freqs_x: frequencies of gamma(x0) for the code encoder E (VG-CODE);
-    n_freqs_t: frequencies of gamma(t) for the time network (VG-COEF; 0 = raw t, which
-      extrapolates without periodicity);
-    n_freqs_adf_x, n_freqs_adf_t: frequencies of the ADF inputs (VG-ADF);
-    code_dim: L, the physics code size; n_patterns: K motion patterns;
-    hidden, depth: width and number of hidden layers of every MLP;
-    mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
-    acc_mask: None or 12 bools, the acceleration's columns (VG-ACC).
-    Masks are stored as tuples of bools so the config stays hashable and serialisable.
-    """
-
-    n_freqs_x: int = 4
-    n_freqs_t: int = 0
-    n_freqs_adf_x: int = 6
-    n_freqs_adf_t: int = 6
-    code_dim: int = 16
-    n_patterns: int = 32
-    hidden: int = 64
-    depth: int = 3
-    mask: tuple | None = None
-    acc_mask: tuple | None = None
-
-    def __post_init__(self):
-        for name in ("n_freqs_x", "n_freqs_t", "n_freqs_adf_x", "n_freqs_adf_t"):
-            _check_int(name, getattr(self, name), 0)
-        for name in ("code_dim", "n_patterns", "hidden", "depth"):
-            _check_int(name, getattr(self, name), 1)
-        for name in ("mask", "acc_mask"):
-            value = getattr(self, name)
-            if value is not None:
-                object.__setattr__(self, name, _check_mask(name, value))
+from velogauss_core.constants import ACC_POLY_DEGREE
+from velogauss_core.motion import N_BASIS, network_shapes
 
 
 def init_motion_params(rng, cfg):
-    """A fresh parameter dict for `cfg`, drawn from the NumPy Generator `rng`.
+    """A fresh parameter dict for `cfg` (`velogauss_core.motion.MotionConfig`), drawn from the
+    NumPy Generator `rng`.
 
-    Layout (all float64 arrays; MLPs are lists of (W (d_in, d_out), b (d_out,))):
+    Layout (all float64 arrays; MLPs are lists of (W (d_in, d_out), b (d_out,)), sizes from
+    `velogauss_core.motion.network_shapes`):
       "code": E, 3 (1 + 2 n_freqs_x) -> hidden^depth -> code_dim;
       "mix":  [(A (code_dim, K), c (K,))], the pattern-mixing softmax of VG-COEF;
       "time": 1 (1 + 2 n_freqs_t) -> hidden^depth -> K * 12, the motion patterns P(t);
@@ -68,14 +27,15 @@ def init_motion_params(rng, cfg):
     scene: the time network's last layer (no velocity), Q (no acceleration) and the ADF's
     last layer (identity correction). Their gradients are not zero, so all of them learn.
     """
-    L, K, H = cfg.code_dim, cfg.n_patterns, cfg.hidden
+    L, K = cfg.code_dim, cfg.n_patterns
+    H, D = cfg.hidden, cfg.depth
+    (code_in, code_out), (time_in, time_out), (adf_in, adf_out) = (network_shapes(cfg)[k] for k in ("code", "time", "adf"))
     return {
-        "code": mlp_layers(rng, 3 * (1 + 2 * cfg.n_freqs_x), H, cfg.depth, L),
+        "code": mlp_layers(rng, code_in, H, D, code_out),
         "mix": [(rng.standard_normal((L, K)) / onp.sqrt(L), onp.zeros(K))],
-        "time": mlp_layers(rng, 1 + 2 * cfg.n_freqs_t, H, cfg.depth, K * N_BASIS, zero_last=True),
+        "time": mlp_layers(rng, time_in, H, D, time_out, zero_last=True),
         "acc": onp.zeros((ACC_POLY_DEGREE + 1, K, N_BASIS)),
-        "adf": mlp_layers(rng, 3 * (1 + 2 * cfg.n_freqs_adf_x) + 1 + 2 * cfg.n_freqs_adf_t + L, H, cfg.depth,
-                           ADF_OUTPUTS, zero_last=True),
+        "adf": mlp_layers(rng, adf_in, H, D, adf_out, zero_last=True),
     }
 
 
@@ -91,15 +51,3 @@ def mlp_layers(rng, d_in, hidden, depth, d_out, zero_last=False):
         else:
             layers.append((rng.uniform(-bound, bound, (a, b)), rng.uniform(-bound, bound, b)))
     return layers
-
-
-def _check_int(name, value, low):
-    if isinstance(value, bool) or not isinstance(value, (int, onp.integer)) or value < low:
-        raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
-
-
-def _check_mask(name, value):
-    mask = onp.asarray(value)
-    if mask.shape != (N_BASIS,) or mask.dtype != bool:
-        raise ValueError(f"{name}: expected {N_BASIS} booleans (VG-BASIS columns), got {value!r}")
-    return tuple(bool(m) for m in mask)

@@ -6,9 +6,8 @@ spec/motion.md, VG-ADF and VG-ADF-COMPOSE.
 import autograd.numpy as np
 
 from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.motion.trajectory import IDENTITY_QUAT, normalize_quat
 from velogauss_ref.nn import mlp, positional_encoding
-from velogauss_ref.quaternion import quat_multiply
+from velogauss_ref.quaternion import IDENTITY_QUAT, normalize_quat, quat_multiply
 
 
 def adf_residual(params, x0, t, z, cfg):

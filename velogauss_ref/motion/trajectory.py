@@ -8,15 +8,11 @@ import numpy as onp
 from autograd.tracer import getval
 
 from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
 from velogauss_ref.motion.coefficients import coefficients
 from velogauss_ref.motion.integrate import integrate
 from velogauss_ref.motion.rotscale import rotscale_rates
 from velogauss_ref.motion.velocity import velocity
-
-# The quaternion of no rotation, (w, x, y, z) = (1, 0, 0, 0).
-IDENTITY_QUAT = onp.array([1.0, 0.0, 0.0, 0.0])
-
+from velogauss_ref.quaternion import normalize_quat
 
 def base_state(params, x0, q0, s0, z, t, h, method, cfg):
     """Integrate y = (x, q, log s) from 0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ).
@@ -50,15 +46,3 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
     y0 = np.concatenate([x0, q0, np.log(s0)], axis=1)  # (N, 10)
     y = integrate(rates, y0, 0.0, t, h, method)
     return y[:, 0:3], normalize_quat(y[:, 3:7]), np.exp(y[:, 7:10])
-
-
-def normalize_quat(q):
-    """q / |q| for q: (..., 4); |q|^2 < QUAT_ZERO_NORM_SQ gives (1, 0, 0, 0) with zero gradient.
-
-    The stand-in is substituted before dividing, so neither branch of np.where sees 0 / 0,
-    forward or backward (as in velogauss_ref.quaternion.quat_to_rotmat).
-    """
-    n2 = np.sum(q * q, axis=-1, keepdims=True)
-    zero = n2 < QUAT_ZERO_NORM_SQ
-    q_safe = np.where(zero, IDENTITY_QUAT, q)
-    return q_safe / np.sqrt(np.where(zero, 1.0, n2))

@@ -1,6 +1,6 @@
-"""Particle velocity Phi(x) w and the Eulerian velocity field v(x, t).
+"""Particle velocity Phi(x) w, the Eulerian velocity field v(x, t) and the no-pds MLP velocity.
 
-spec/motion.md, VG-VEL and VG-FIELD.
+spec/motion.md, VG-VEL, VG-FIELD and VG-VEL-MLP.
 """
 
 import autograd.numpy as np
@@ -9,6 +9,7 @@ from velogauss_ref.checks import check_array, check_scalar
 from velogauss_ref.motion.basis import basis_matrix
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import coefficients
+from velogauss_ref.nn import mlp, positional_encoding
 
 
 def velocity(x, w):
@@ -33,3 +34,17 @@ def velocity_field(params, x, t, cfg):
     check_array("x", x, (None, 3))
     check_scalar("t", t)
     return velocity(x, coefficients(params, t, physics_code(params, x, cfg), cfg))
+
+
+def mlp_velocity(params, x, t, cfg):
+    """v(x, t) = MLP_v([gamma(x), t]): the unconstrained velocity of the "no-pds" ablation (VG-VEL-MLP).
+
+    params: dict with "velocity_mlp" (layers 3 (1 + 2 cfg.n_freqs_x) + 1 -> hidden^depth -> 3);
+    x: (N, 3) points; t: scalar time, any real value; cfg: MotionConfig -> v: (N, 3).
+    No code and no basis: it moves positions only. Non-finite or wrongly shaped input
+    raises ValueError.
+    """
+    check_array("x", x, (None, 3))
+    check_scalar("t", t)
+    t_col = t * np.ones((np.shape(x)[0], 1))
+    return mlp(params["velocity_mlp"], np.concatenate([positional_encoding(x, cfg.n_freqs_x), t_col], axis=1))

@@ -6,10 +6,10 @@ spec/physics.md, VG-ACC.
 import autograd.numpy as np
 
 from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.constants import ACC_POLY_DEGREE
+from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import masked, mixing_weights
-from velogauss_ref.motion.config import N_BASIS
+from velogauss_core.motion import N_BASIS
 from velogauss_ref.motion.velocity import velocity
 
 

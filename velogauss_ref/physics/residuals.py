@@ -1,6 +1,6 @@
 """Transport (momentum) and divergence residuals of the Eulerian velocity field.
 
-spec/physics.md, VG-TRANSPORT and VG-DIV (paper eqs. 7-8). Every derivative is taken by
+spec/physics.md, VG-TRANSPORT, VG-DIV (paper eqs. 7-8) and VG-TRANSPORT-MLP. Every derivative is taken by
 `autograd`, one collocation point at a time, through the whole field
 v(x, t) = Phi(x) w(t, E(gamma(x))) -- the code's dependence on x included. Slow and exact:
 the fast path's structured forward-mode derivatives are tested against these.
@@ -10,7 +10,7 @@ import autograd.numpy as np
 from autograd import jacobian
 
 from velogauss_ref.checks import check_array, check_scalar
-from velogauss_ref.motion.velocity import velocity_field
+from velogauss_ref.motion.velocity import mlp_velocity, velocity_field
 from velogauss_ref.physics.acceleration import acceleration_field
 
 
@@ -50,10 +50,38 @@ def velocity_derivatives(params, x, t, cfg):
     depends on x_n alone, so this is exactly the per-point derivative. No points (N = 0)
     give empty arrays.
     """
+    return _point_derivatives(lambda y, s: velocity_field(params, y, s, cfg), x, t)
+
+
+def mlp_residuals(params, x, t, cfg, with_divergence=False):
+    """Transport residual (N, 3) and divergence (N,) or None of the no-pds MLP velocity (VG-TRANSPORT-MLP).
+
+    The velocity is VG-VEL-MLP's, evaluated at each collocation point.
+
+    r = dv/dt + (grad v) v - a with v = MLP_v([gamma(x), t]) and a from VG-ACC (the same
+    acceleration field as with PDS); div v = trace(grad v) when `with_divergence`, else None.
+    params: dict with "velocity_mlp", "code", "mix" and "acc"; x: (N, 3); t: scalar time.
+    Non-finite or wrongly shaped input raises ValueError.
+    """
+    check_array("x", x, (None, 3))
+    check_scalar("t", t)
+    dv_dt, grad_v = _point_derivatives(lambda y, s: mlp_velocity(params, y, s, cfg), x, t)
+    v = mlp_velocity(params, x, t, cfg)
+    r = dv_dt + np.einsum("nij,nj->ni", grad_v, v) - acceleration_field(params, x, t, cfg)
+    div = grad_v[:, 0, 0] + grad_v[:, 1, 1] + grad_v[:, 2, 2] if with_divergence else None
+    return r, div
+
+
+def _point_derivatives(field, x, t):
+    """(dv/dt (N, 3), grad v (N, 3, 3)) of the field (x (M, 3), t) -> v (M, 3), per point.
+
+    One autograd Jacobian with respect to the point's (x, y, z, t) per point: the fields
+    here act on each point alone, so this is exactly the per-point derivative.
+    """
     n = np.shape(x)[0]
 
     def v_at(xt):  # (x, y, z, t) of one point -> v (3,)
-        return velocity_field(params, np.reshape(xt[0:3], (1, 3)), xt[3], cfg)[0]
+        return field(np.reshape(xt[0:3], (1, 3)), xt[3])[0]
 
     # J_n (3, 4): columns 0..2 are grad v at x_n, column 3 is dv/dt.
     J = [jacobian(v_at)(np.concatenate([x[k], np.reshape(t, (1,))])) for k in range(n)]

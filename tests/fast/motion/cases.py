@@ -20,7 +20,8 @@ from hypothesis import HealthCheck, settings
 # The NumPy-side helpers (configs, parameter dicts, masks) are shared with the reference's
 # tests; the fast tests import them from here with the torch-side checks.
 from tests.ref.motion.cases import (RIGID_MASK, TRANSLATION_MASK, column_mask,  # noqa: F401
-                                    constant_coefficient_params, map_leaves, random_params, small_cfg)
+                                    constant_coefficient_params, map_leaves, mlp_velocity_params, random_params,
+                                    small_cfg)
 from velogauss_fast.motion.params import params_to_torch
 
 # float64 fast vs reference: both evaluate the same formulas in the same order up to a

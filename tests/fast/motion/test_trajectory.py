@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32, column_mask,
                                      constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
-from velogauss_fast.motion.trajectory import base_state, normalize_quat
+from velogauss_fast.motion.trajectory import base_state
+from velogauss_fast.quaternion import normalize_quat
 from velogauss_fast.quaternion import quat_multiply, quat_to_rotmat
 from velogauss_ref.motion import trajectory as ref
 

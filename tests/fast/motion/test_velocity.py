@@ -7,11 +7,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32, gradcheck_fn,
-                                     random_params, small_cfg, to_torch)
+                                     mlp_velocity_params, random_params, small_cfg, to_torch)
 from velogauss_fast.motion.basis import basis_matrix
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import coefficients
-from velogauss_fast.motion.velocity import velocity, velocity_field
+from velogauss_fast.motion.velocity import mlp_velocity, velocity, velocity_field
 from velogauss_ref.motion import velocity as ref
 
 seeds = st.integers(0, 2**32 - 1)
@@ -76,3 +76,14 @@ def test_rejects_bad_input():
         velocity_field(params, torch.zeros(2, 3, dtype=torch.float64), float("inf"), cfg)
     with pytest.raises(ValueError, match="^x"):
         velocity_field(params, torch.full((2, 3), float("nan"), dtype=torch.float64), 0.0, cfg)
+
+
+@pytest.mark.spec("VG-VEL-MLP")
+@DEVICE_SETTINGS
+@given(seed=seeds, t=st.sampled_from([0.0, 0.6, -3.0]), n=st.sampled_from([0, 5]))
+def test_mlp_velocity_reference_vs_fast(device, seed, t, n):
+    cfg = small_cfg()
+    x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
+    args = (mlp_velocity_params(seed, cfg), x, t, cfg)
+    check_agreement(ref.mlp_velocity, mlp_velocity, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(ref.mlp_velocity, mlp_velocity, args, device)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, TRANSLATION_MASK, check_agreement, check_float32,
                                      constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
 from velogauss_fast.physics.acceleration import acceleration_field
-from velogauss_ref.constants import ACC_POLY_DEGREE
+from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_ref.physics import acceleration as ref
 
 

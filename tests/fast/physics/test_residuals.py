@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32,
-                                     constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
-from velogauss_fast.physics.residuals import divergence, physics_residuals, transport_residual
+                                     constant_coefficient_params, gradcheck_fn, mlp_velocity_params, random_params, small_cfg,
+                                     to_torch)
+from velogauss_fast.physics.residuals import divergence, mlp_residuals, physics_residuals, transport_residual
 from velogauss_ref.physics import residuals as ref
 
 
@@ -139,3 +140,22 @@ def test_rejects_bad_input(fn):
         fn(params, torch.full((2, 3), float("nan"), dtype=torch.float64), 0.1, cfg)
     with pytest.raises(ValueError, match="^t"):
         fn(params, torch.zeros(2, 3, dtype=torch.float64), float("nan"), cfg)
+
+
+def _mlp_both(params, x, t, cfg):
+    return mlp_residuals(params, x, t, cfg, with_divergence=True)
+
+
+def _ref_mlp_both(params, x, t, cfg):
+    return ref.mlp_residuals(params, x, t, cfg, with_divergence=True)
+
+
+@pytest.mark.spec("VG-TRANSPORT-MLP")
+@settings(DEVICE_SETTINGS, max_examples=6)
+@given(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.4, -1.5]), n=st.sampled_from([0, 1, 3]))
+def test_mlp_residuals_reference_vs_fast(device, seed, t, n):
+    cfg = small_cfg()
+    x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
+    args = (mlp_velocity_params(seed, cfg), x, t, cfg)
+    check_agreement(_ref_mlp_both, _mlp_both, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(_ref_mlp_both, _mlp_both, args, device)

@@ -10,8 +10,8 @@ import autograd.numpy as anp
 import numpy as np
 from autograd.misc import flatten
 
-from velogauss_ref.motion.basis import COLUMN_GROUPS
-from velogauss_ref.motion.config import N_BASIS, MotionConfig, init_motion_params
+from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, MotionConfig, network_shapes
+from velogauss_ref.motion.config import init_motion_params, mlp_layers
 
 # Finite-difference step of the gradient checks that run through the networks
 # (check_grads_fd's default is 1e-6). At 1e-6 rounding of the differences (eps times the
@@ -57,6 +57,15 @@ def random_params(seed, cfg, scale=1.0):
     params = init_motion_params(rng, cfg)
     return map_leaves(lambda a: np.asarray(a, dtype=np.float64) + scale * 0.3 * rng.standard_normal(np.shape(a)),
                       params)
+
+
+def mlp_velocity_params(seed, cfg):
+    """`random_params` plus the no-pds velocity MLP "velocity_mlp" (VG-VEL-MLP), noised likewise."""
+    rng = np.random.default_rng(seed + 1)
+    d_in, d_out = network_shapes(cfg)["velocity_mlp"]
+    layers = mlp_layers(rng, d_in, cfg.hidden, cfg.depth, d_out)
+    noisy = map_leaves(lambda a: a + 0.3 * rng.standard_normal(np.shape(a)), layers)
+    return {**random_params(seed, cfg), "velocity_mlp": noisy}
 
 
 def map_leaves(fn, node):

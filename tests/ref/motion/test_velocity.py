@@ -8,10 +8,10 @@ from hypothesis.extra import numpy as hnp
 
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, affine_matrix, constant_coefficient_params, flat_params,
-                                    random_params, small_cfg)
+                                    mlp_velocity_params, random_params, small_cfg)
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import coefficients
-from velogauss_ref.motion.velocity import velocity, velocity_field
+from velogauss_ref.motion.velocity import mlp_velocity, velocity, velocity_field
 
 # Sums of a few O(1) float64 products.
 TOL = 1e-13
@@ -88,3 +88,29 @@ def test_bad_input_names_the_argument(call, name):
     cfg = small_cfg()
     with pytest.raises(ValueError, match=f"^{name}:"):
         call(random_params(0, cfg), cfg)
+
+
+@pytest.mark.spec("VG-VEL-MLP")
+def test_mlp_velocity_is_the_mlp_of_encoded_position_and_time():
+    # Written out by hand for one point: gamma(x) with cfg.n_freqs_x frequencies, then t,
+    # through silu hidden layers and a linear last layer.
+    cfg = small_cfg()
+    params = mlp_velocity_params(2, cfg)
+    x, t = np.array([[0.3, -0.7, 1.1]]), 0.45
+    freqs = [2.0**k * np.pi for k in range(cfg.n_freqs_x)]
+    h = np.concatenate([x[0]] + [f(c * x[0]) for c in freqs for f in (np.sin, np.cos)] + [[t]])
+    layers = params["velocity_mlp"]
+    for W, b in layers[:-1]:
+        u = h @ W + b
+        h = u / (1 + np.exp(-u))
+    expected = h @ layers[-1][0] + layers[-1][1]
+    np.testing.assert_allclose(mlp_velocity(params, x, t, cfg)[0], expected, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.spec("VG-VEL-MLP")
+@given(seed=seeds, x=hnp.arrays(np.float64, (3, 3), elements=st.floats(-1.5, 1.5)), t=st.floats(-3, 3))
+def test_mlp_velocity_gradient(seed, x, t):
+    cfg = small_cfg()
+    theta, unflatten = flat_params(mlp_velocity_params(seed, cfg))
+    check_grads_fd(lambda theta, x, t: mlp_velocity(unflatten(theta), x, t, cfg), (theta, x, t), (0, 1, 2),
+                   np.random.default_rng(seed), step=FD_STEP)

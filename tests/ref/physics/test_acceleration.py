@@ -11,7 +11,7 @@ from hypothesis.extra import numpy as hnp
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, TRANSLATION_MASK, affine_matrix,
                                     constant_coefficient_params, flat_params, random_params, small_cfg)
-from velogauss_ref.constants import ACC_POLY_DEGREE
+from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_ref.physics.acceleration import acceleration_field
 
 seeds = st.integers(0, 2**32 - 1)

@@ -10,11 +10,12 @@ from hypothesis.extra import numpy as hnp
 
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, affine_matrix, constant_coefficient_params, flat_params,
-                                    random_params, small_cfg)
+                                    mlp_velocity_params, random_params, small_cfg)
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import coefficients
-from velogauss_ref.motion.velocity import velocity_field
-from velogauss_ref.physics.residuals import divergence, transport_residual, velocity_derivatives
+from velogauss_ref.motion.velocity import mlp_velocity, velocity_field
+from velogauss_ref.physics.acceleration import acceleration_field
+from velogauss_ref.physics.residuals import divergence, mlp_residuals, transport_residual, velocity_derivatives
 
 seeds = st.integers(0, 2**32 - 1)
 points = hnp.arrays(np.float64, (4, 3), elements=st.floats(-1.5, 1.5))
@@ -163,3 +164,26 @@ def test_bad_input_names_the_argument(fn, x, t, name):
     cfg = small_cfg()
     with pytest.raises(ValueError, match=f"^{name}:"):
         fn(random_params(0, cfg), x, t, cfg)
+
+
+@pytest.mark.spec("VG-TRANSPORT-MLP")
+@pytest.mark.parametrize("seed", [0, 1])
+def test_mlp_residuals_against_finite_differences(seed):
+    # dv/dt, (grad v) v and div v of the MLP velocity by central differences (step 1e-5:
+    # truncation ~1e-10 and rounding ~1e-11 on these O(1) smooth networks), against the
+    # residuals autograd gives; the acceleration term is VG-ACC's field, as with PDS.
+    cfg = small_cfg()
+    params = mlp_velocity_params(seed, cfg)
+    x = np.random.default_rng(seed).uniform(-1.2, 1.2, (4, 3))
+    t, h = 0.35, 1e-5
+    v = mlp_velocity(params, x, t, cfg)
+    dv_dt = (mlp_velocity(params, x, t + h, cfg) - mlp_velocity(params, x, t - h, cfg)) / (2 * h)
+    grad_v = np.stack([(mlp_velocity(params, x + h * e, t, cfg) - mlp_velocity(params, x - h * e, t, cfg)) / (2 * h)
+                       for e in np.eye(3)], axis=-1)  # [n, i, j] = dv_i / dx_j
+    expected = dv_dt + np.einsum("nij,nj->ni", grad_v, v) - acceleration_field(params, x, t, cfg)
+    r, div = mlp_residuals(params, x, t, cfg, with_divergence=True)
+    np.testing.assert_allclose(r, expected, rtol=0, atol=1e-7 * np.abs(expected).max())
+    np.testing.assert_allclose(div, np.trace(grad_v, axis1=1, axis2=2), rtol=0, atol=1e-7)
+    r_only, none = mlp_residuals(params, x, t, cfg)
+    assert none is None
+    np.testing.assert_array_equal(r_only, r)

@@ -9,11 +9,11 @@ from velogauss_ref.losses import physics_loss, photometric_loss
 from velogauss_ref.metrics import lpips, psnr, ssim
 from velogauss_ref.physics.residuals import divergence, transport_residual
 from velogauss_ref.raster import rasterize
-from velogauss_ref.walkthrough.blending import RENDER_FOCAL, RENDER_SIZE, WHITE
-from velogauss_ref.walkthrough.figures import new_figure, save
-from velogauss_ref.walkthrough.physics import POINTS, T, fields
-from velogauss_ref.walkthrough.printing import Section, session
-from velogauss_ref.walkthrough.setups import CFG, camera, scene_gaussians
+from velogauss.walkthrough.blending import RENDER_FOCAL, RENDER_SIZE, WHITE
+from velogauss.walkthrough.figures import new_figure, save
+from velogauss.walkthrough.physics import POINTS, T, fields
+from velogauss.walkthrough.printing import Section, session
+from velogauss.walkthrough.setups import CFG, camera, scene_gaussians
 
 NOISE = 0.06
 

@@ -4,9 +4,9 @@ import numpy as np
 
 from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.quaternion import quat_multiply, quat_to_rotmat
-from velogauss_ref.walkthrough.figures import new_figure, save
-from velogauss_ref.walkthrough.printing import Section, session
-from velogauss_ref.walkthrough.setups import axis_angle_quat
+from velogauss.walkthrough.figures import new_figure, save
+from velogauss.walkthrough.printing import Section, session
+from velogauss.walkthrough.setups import axis_angle_quat
 
 
 def quat_section(figures):

@@ -11,9 +11,9 @@ from velogauss_ref.motion.integrate import METHODS, integrate
 from velogauss_ref.motion.rotscale import rotscale_rates
 from velogauss_ref.motion.trajectory import base_state
 from velogauss_ref.motion.velocity import velocity
-from velogauss_ref.walkthrough.figures import covariance_ellipse, new_figure, save
-from velogauss_ref.walkthrough.printing import Section, number, session, table, timings
-from velogauss_ref.walkthrough.setups import CFG, axis_angle_quat, coefficient_vector, constant_motion_params
+from velogauss.walkthrough.figures import covariance_ellipse, new_figure, save
+from velogauss.walkthrough.printing import Section, number, session, table, timings
+from velogauss.walkthrough.setups import CFG, axis_angle_quat, coefficient_vector, constant_motion_params
 
 OMEGA = 2 * np.pi  # one full turn about z over t in [0, 1]
 STEPS = [2.0**-k for k in range(2, 8)]  # h = 1/4 .. 1/128; RK4's error stays far above rounding

@@ -1,4 +1,4 @@
-"""velogauss_ref.walkthrough: the committed docs/walkthrough.md is exactly what the reference
+"""velogauss.walkthrough: the committed docs/walkthrough.md is exactly what the reference
 produces today (wall-clock times aside), it covers every ID of spec/index.toml in order, and
 every figure it shows exists at a sane size."""
 
@@ -15,14 +15,14 @@ import pytest
 from typer.testing import CliRunner
 
 from velogauss.cli import app
-from velogauss_ref.lpips_nets import CHECKOUT_DIR, ENV_VAR, cache_dir
-from velogauss_ref.walkthrough import write_walkthrough
-from velogauss_ref.walkthrough.printing import TIMINGS_END, TIMINGS_START
+from velogauss_core.lpips_nets import CHECKOUT_DIR, ENV_VAR, cache_dir
+from velogauss.walkthrough import write_walkthrough
+from velogauss.walkthrough.printing import TIMINGS_END, TIMINGS_START
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 INDEX = tomllib.loads((ROOT / "spec" / "index.toml").read_text(encoding="utf-8"))["equation"]
-REGENERATE = "python -m velogauss_ref.walkthrough --out docs"
+REGENERATE = "python -m velogauss.walkthrough --out docs"
 # The figures are drawn 8-12 inches wide at 110 dpi (900-1300 px) and 2.4-8.6 inches tall:
 # anything under 300 x 150 px is a broken or empty figure, not a layout choice.
 MIN_WIDTH, MIN_HEIGHT = 300, 150
@@ -35,7 +35,7 @@ HEADING = re.compile(r"^## (VG-[A-Z0-9-]+): (.*)$", re.MULTILINE)
 
 
 def lpips_weights_present():
-    """Whether velogauss_ref.lpips_nets finds alex.npz without a download: in $VELOGAUSS_LPIPS_DIR
+    """Whether velogauss_core.lpips_nets finds alex.npz without a download: in $VELOGAUSS_LPIPS_DIR
     when it is set (no fall-through past it), else beside the checkout or in the user cache."""
     env = os.environ.get(ENV_VAR)
     return any((Path(folder) / "alex.npz").is_file() for folder in ([env] if env else [CHECKOUT_DIR, cache_dir()]))
@@ -79,10 +79,10 @@ def timing_blocks(text):
 
 
 def regenerate(out):
-    """Write a fresh walkthrough into `out` by `python -m velogauss_ref.walkthrough` in a new
+    """Write a fresh walkthrough into `out` by `python -m velogauss.walkthrough` in a new
     interpreter, which must not have imported torch (the reference is NumPy only)."""
     code = ("import runpy, sys; out = sys.argv[1]; sys.argv = ['walkthrough', '--out', out]; "
-            "runpy.run_module('velogauss_ref.walkthrough', run_name='__main__'); "
+            "runpy.run_module('velogauss.walkthrough', run_name='__main__'); "
             "assert 'torch' not in sys.modules, 'the walkthrough imported torch'")
     result = subprocess.run([sys.executable, "-c", code, str(out)], cwd=ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr

@@ -1,13 +1,13 @@
-"""`python -m velogauss_ref.walkthrough --out DIR`: write DIR/walkthrough.md and DIR/figures/."""
+"""`python -m velogauss.walkthrough --out DIR`: write DIR/walkthrough.md and DIR/figures/."""
 
 import argparse
 
-from velogauss_ref.walkthrough.build import write_walkthrough
+from velogauss.walkthrough.build import write_walkthrough
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog="python -m velogauss_ref.walkthrough",
+        prog="python -m velogauss.walkthrough",
         description="Write the equation-by-equation walkthrough (walkthrough.md and figures/) "
                     "by running the NumPy reference. The committed copy lives in docs/.")
     parser.add_argument("--out", required=True, help="output folder (docs to refresh the committed copy)")

@@ -6,10 +6,10 @@ import numpy as np
 from velogauss_ref.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import coefficients, mixing_weights, motion_patterns
-from velogauss_ref.motion.velocity import velocity, velocity_field
-from velogauss_ref.walkthrough.figures import COLUMN_COLOURS, COLUMN_LABELS, new_figure, save
-from velogauss_ref.walkthrough.printing import Section, session
-from velogauss_ref.walkthrough.setups import CFG, coefficient_vector, learned_motion_params
+from velogauss_ref.motion.velocity import mlp_velocity, velocity, velocity_field
+from velogauss.walkthrough.figures import COLUMN_COLOURS, COLUMN_LABELS, new_figure, save
+from velogauss.walkthrough.printing import Section, session
+from velogauss.walkthrough.setups import CFG, coefficient_vector, learned_motion_params, mlp_velocity_params
 
 # Two canonical positions whose codes mix the motion patterns differently (VG-COEF's figure).
 X_A, X_B = np.array([[-0.6, 0.3, 0.0]]), np.array([[0.7, -0.4, 0.2]])
@@ -179,5 +179,20 @@ def _field_figure(figures, params):
                 "the physics residuals (VG-TRANSPORT, VG-DIV) measure how far from physical it is.")
 
 
+def mlp_velocity_section(figures):
+    """VG-VEL-MLP: the no-pds velocity at a few points and times; no code, no basis."""
+    params = mlp_velocity_params()
+    x = np.array([[1.0, 0.0, 0.0], [0.0, -0.5, 0.3]])
+    return Section(
+        "The \"no-pds\" ablation replaces the affine basis and the physics code by one unconstrained "
+        "network of position and time, as the paper's ablation does. Nothing ties neighbouring "
+        "points to a shared rigid or affine motion, and the velocity carries no rotation or strain "
+        "rule: integrated from t = 0 it moves positions only. Training starts its last layer at "
+        "zero; here it is random so that the field moves.",
+        [session({"x": x}, "v = mlp_velocity(params, x, 0.0, cfg)", {"v": mlp_velocity(params, x, 0.0, CFG)},
+                 "v = mlp_velocity(params, x, 0.5, cfg)", {"v": mlp_velocity(params, x, 0.5, CFG)})],
+    )
+
+
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
-            "VG-VEL": velocity_section, "VG-FIELD": field_section}
+            "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-VEL-MLP": mlp_velocity_section}

@@ -4,8 +4,8 @@ import numpy as np
 
 from velogauss_ref.motion.config import mlp_layers
 from velogauss_ref.nn import mlp, positional_encoding
-from velogauss_ref.walkthrough.figures import new_figure, save
-from velogauss_ref.walkthrough.printing import Section, session
+from velogauss.walkthrough.figures import new_figure, save
+from velogauss.walkthrough.printing import Section, session
 
 
 def encoding_section(figures):

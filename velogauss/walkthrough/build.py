@@ -10,17 +10,17 @@ import inspect
 import os
 from pathlib import Path
 
-from velogauss_ref.walkthrough import (blending, deformation, fields, gaussians, integration, losses_metrics,
+from velogauss.io_utils import atomic_path
+from velogauss.walkthrough import (blending, deformation, fields, gaussians, integration, losses_metrics,
                                        networks, physics, screen, spec_text)
-from velogauss_ref.walkthrough.files import atomic_path
-from velogauss_ref.walkthrough.printing import SIGNIFICANT_DIGITS, TIMINGS_END, TIMINGS_START, ZERO_BELOW
+from velogauss.walkthrough.printing import SIGNIFICANT_DIGITS, TIMINGS_END, TIMINGS_START, ZERO_BELOW
 
 PARTS = (gaussians, screen, blending, networks, fields, integration, deformation, physics, losses_metrics)
 SECTIONS = {spec_id: section for part in PARTS for spec_id, section in part.SECTIONS.items()}
 # Links in the page are relative to the committed copy's folder, whatever --out is, so that
 # every regeneration writes the same text.
 DOCS = spec_text.ROOT / "docs"
-COMMAND = "python -m velogauss_ref.walkthrough --out docs"
+COMMAND = "python -m velogauss.walkthrough --out docs"
 
 
 def write_walkthrough(out):
@@ -38,7 +38,7 @@ def write_walkthrough(out):
     ids = [entry["id"] for entry in entries]
     missing, extra = [i for i in ids if i not in SECTIONS], [i for i in SECTIONS if i not in ids]
     if missing or extra:
-        raise RuntimeError(f"spec/index.toml and velogauss_ref.walkthrough disagree: IDs without a section "
+        raise RuntimeError(f"spec/index.toml and velogauss.walkthrough disagree: IDs without a section "
                            f"{missing}, sections without an ID {extra}; add or remove them in a part module")
     figures = out / "figures"
     try:
@@ -85,7 +85,7 @@ why, the spec's own text (quoted verbatim), the reference function that implemen
 and outputs, and, where a picture says more than numbers, a figure.
 
 Nothing here is typed by hand. `{COMMAND}` runs the reference and writes this page and
-`figures/`; `tests/ref/test_walkthrough.py` regenerates it and fails when the text differs, so
+`figures/`; `tests/app/test_walkthrough.py` regenerates it and fails when the text differs, so
 the page cannot drift from the code or from the spec. Numbers are printed with
 {SIGNIFICANT_DIGITS} significant digits, and magnitudes below {ZERO_BELOW:g} (the rounding noise of an exact
 zero) as 0, so that they are the same on every machine. Wall-clock times are the exception: they

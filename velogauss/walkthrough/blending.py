@@ -3,11 +3,11 @@
 import numpy as np
 from matplotlib.patches import Rectangle
 
-from velogauss_ref.constants import ALPHA_MAX, ALPHA_MIN, GAUSSIAN_EXTENT_SIGMA, TRANSMITTANCE_MIN
+from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, GAUSSIAN_EXTENT_SIGMA, TRANSMITTANCE_MIN
 from velogauss_ref.raster import blend, rasterize, splat_alpha
-from velogauss_ref.walkthrough.figures import covariance_ellipse, new_figure, save
-from velogauss_ref.walkthrough.printing import Section, number, session
-from velogauss_ref.walkthrough.setups import camera, scene_gaussians
+from velogauss.walkthrough.figures import covariance_ellipse, new_figure, save
+from velogauss.walkthrough.printing import Section, number, session
+from velogauss.walkthrough.setups import camera, scene_gaussians
 
 RENDER_SIZE, RENDER_FOCAL = 32, 40.0
 WHITE = np.ones(3)

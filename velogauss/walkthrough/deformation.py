@@ -7,9 +7,9 @@ from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.config import init_motion_params
 from velogauss_ref.motion.deform import adf_residual, compose_state
 from velogauss_ref.motion.trajectory import base_state
-from velogauss_ref.walkthrough.figures import new_figure, save
-from velogauss_ref.walkthrough.printing import Section, session
-from velogauss_ref.walkthrough.setups import CFG, axis_angle_quat, learned_motion_params
+from velogauss.walkthrough.figures import new_figure, save
+from velogauss.walkthrough.printing import Section, session
+from velogauss.walkthrough.setups import CFG, axis_angle_quat, learned_motion_params
 
 X0 = np.array([[-0.6, 0.3, 0.0], [0.7, -0.4, 0.2]])
 Q0 = np.tile(axis_angle_quat([0, 0, 1], 0), (2, 1))

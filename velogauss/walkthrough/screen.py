@@ -3,13 +3,13 @@
 import numpy as np
 from matplotlib.patches import Rectangle
 
-from velogauss_ref.constants import EPS2D, GAUSSIAN_EXTENT_SIGMA
+from velogauss_core.constants import EPS2D, GAUSSIAN_EXTENT_SIGMA
 from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.projection import project_gaussians
 from velogauss_ref.sh import sh_to_color
-from velogauss_ref.walkthrough.figures import covariance_ellipse, new_figure, save
-from velogauss_ref.walkthrough.printing import Section, number, session
-from velogauss_ref.walkthrough.setups import axis_angle_quat, camera
+from velogauss.walkthrough.figures import covariance_ellipse, new_figure, save
+from velogauss.walkthrough.printing import Section, number, session
+from velogauss.walkthrough.setups import axis_angle_quat, camera
 
 WIDTH, HEIGHT, FOCAL = 48, 32, 40.0
 

@@ -9,8 +9,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 
-from velogauss_ref.motion.basis import COLUMN_GROUPS
-from velogauss_ref.walkthrough.files import atomic_path
+from velogauss_core.motion import COLUMN_GROUPS
+from velogauss.io_utils import atomic_path
 
 DPI = 110
 # One colour family per basis group (VG-BASIS), three shades each, so a curve's colour says

@@ -6,7 +6,7 @@ below ZERO_BELOW printed as 0, so that the text is the same on every machine (di
 BLAS kernels and summation orders change the last bits of a result, and the rounding noise
 of an exact zero, ~1e-16, changes its sign and digits). Wall-clock times are the one thing
 that cannot be made stable: they only appear inside `timings` blocks, which the
-regeneration check (tests/ref/test_walkthrough.py) strips before comparing.
+regeneration check (tests/app/test_walkthrough.py) strips before comparing.
 """
 
 from typing import NamedTuple

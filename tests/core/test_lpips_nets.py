@@ -1,12 +1,12 @@
-"""velogauss_ref.lpips_nets: the LPIPS layer tables, weight validation and resolution order
+"""velogauss_core.lpips_nets: the LPIPS layer tables, weight validation and resolution order
 (VG-METRIC-LPIPS). Downloads need network, so `download` is replaced by stand-ins here."""
 
 import numpy as np
 import pytest
 import torch
 
-from velogauss_ref import lpips_nets
-from velogauss_ref.lpips_nets import (CHECKOUT_DIR, ENV_VAR, convert_state_dicts, min_image_size, read_weights,
+from velogauss_core import lpips_nets
+from velogauss_core.lpips_nets import (CHECKOUT_DIR, ENV_VAR, convert_state_dicts, min_image_size, read_weights,
                                       weight_shapes, weights_file)
 
 

@@ -4,8 +4,8 @@ motion parameters whose fields are known in closed form. Everything comes from f
 
 import numpy as np
 
-from velogauss_ref.motion.basis import COLUMN_GROUPS
-from velogauss_ref.motion.config import N_BASIS, MotionConfig, init_motion_params
+from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, MotionConfig, network_shapes
+from velogauss_ref.motion.config import init_motion_params, mlp_layers
 
 # Far smaller networks than training's defaults (spec/motion.md: L = 16, K = 32, hidden 64,
 # depth 3), so that every example, and the per-point autograd residuals in particular, runs
@@ -87,3 +87,15 @@ def learned_motion_params(seed=0, time_scale=0.6, adf_scale=0.05, mix_scale=10.0
         W, b = params[head][-1]
         params[head][-1] = (scale * rng.standard_normal(W.shape), scale * rng.standard_normal(b.shape))
     return params
+
+
+def mlp_velocity_params(seed=0, head_scale=0.5):
+    """`learned_motion_params` plus the no-pds velocity MLP "velocity_mlp" (VG-VEL-MLP), its
+    last layer (zero when training starts) drawn at random with standard deviation
+    `head_scale`, so that the example field moves."""
+    rng = np.random.default_rng(seed + 1)
+    d_in, d_out = network_shapes(CFG)["velocity_mlp"]
+    layers = mlp_layers(rng, d_in, CFG.hidden, CFG.depth, d_out, zero_last=True)
+    W, b = layers[-1]
+    layers[-1] = (head_scale * rng.standard_normal(W.shape), head_scale * rng.standard_normal(b.shape))
+    return {**learned_motion_params(seed), "velocity_mlp": layers}

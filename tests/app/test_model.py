@@ -1,0 +1,123 @@
+"""velogauss.model: the resolved MotionSpec, the parameter module and the pure motion functions."""
+
+import numpy as np
+import pytest
+import torch
+
+from velogauss.config import ModelConfig
+from velogauss.model.dynamic import VeloGaussModel
+from velogauss.model.gaussians import Gaussians
+from velogauss.model.motion import MotionParameters, gaussians_at, motion_residuals, velocity_at
+from velogauss.model.profile import resolve_profile
+from velogauss.model.spec import resolve_motion_spec
+from velogauss_core.motion import ABLATIONS
+
+RIGID = resolve_profile(("translation", "rotation"), False)
+INCOMPRESSIBLE = resolve_profile(("translation", "rotation"), True)
+GRAVITY = resolve_profile(("translation", "gravity"), False)
+STATIC = resolve_profile(("static",), False)
+# Uniform translation: Dv/Dt = 0, so no acceleration polynomial (velogauss.model.profile).
+DRIFT = resolve_profile(("translation",), False)
+SMALL = dict(n_freqs_x=1, n_freqs_adf_x=1, n_freqs_adf_t=1, code_dim=3, n_patterns=4, hidden=8, depth=1)
+
+
+def _spec(ablation="full", profile=RIGID, **overrides):
+    return resolve_motion_spec(ModelConfig(ablation=ablation, **{**SMALL, **overrides}), profile, 0.75)
+
+
+def _canonical(n=16, seed=0):
+    rng = np.random.default_rng(seed)
+    q = torch.tensor(rng.standard_normal((n, 4)), dtype=torch.float32)
+    return (torch.tensor(rng.uniform(-1, 1, (n, 3)), dtype=torch.float32), q / q.norm(dim=1, keepdim=True),
+            torch.tensor(rng.uniform(0.05, 0.2, (n, 3)), dtype=torch.float32))
+
+
+# The paper's ablation table (velogauss.model.spec): velocity, ADF, physics losses.
+@pytest.mark.parametrize("ablation, velocity, adf, physics", [
+    ("full", "affine", True, True), ("no-pds", "mlp", True, True), ("no-adf", "affine", False, True),
+    ("no-gpc", "affine", True, False), ("deform-only", None, True, False)])
+def test_each_ablation_resolves_to_its_row_of_the_table(ablation, velocity, adf, physics):
+    spec = _spec(ablation, INCOMPRESSIBLE)
+    assert (spec.scheme, spec.moving, spec.velocity, spec.adf, spec.physics_loss) == (
+        "integrate", True, velocity, adf, physics)
+    assert spec.adf_loss == (adf and velocity is not None)
+    assert spec.divergence == physics  # the profile is incompressible: on wherever GPC is
+    # deform-only is DefGS-style: its ADF sees every t; the others hold it at max_time.
+    assert spec.adf_clamp_time == (None if ablation == "deform-only" else 0.75)
+    assert spec.config.mask == INCOMPRESSIBLE.mask and spec.config.code_dim == SMALL["code_dim"]
+
+
+def test_a_static_scene_resolves_to_no_motion_and_no_losses():
+    for ablation in ABLATIONS:
+        spec = _spec(ablation, STATIC)
+        assert not (spec.moving or spec.velocity or spec.adf or spec.adf_loss or spec.physics_loss
+                    or spec.divergence or spec.acceleration), ablation
+        with pytest.raises(ValueError, match="^spec: "):
+            MotionParameters(spec)
+
+
+def test_parameters_follow_the_spec():
+    full = MotionParameters(_spec("full", GRAVITY), torch.Generator().manual_seed(0))
+    assert {"code", "mix", "time", "adf", "acc"} <= set(dict(full.named_children()) | dict(full.named_parameters()))
+    assert set(full.params()) == {"code", "mix", "time", "adf", "acc"}
+    no_adf = MotionParameters(_spec("no-adf", DRIFT), torch.Generator().manual_seed(0))
+    assert not hasattr(no_adf, "adf") and not hasattr(no_adf, "acc")
+    params = no_adf.params()
+    assert set(params) == {"code", "mix", "time", "acc"} and not params["acc"].any()  # Q = 0, not a parameter
+    no_pds = MotionParameters(_spec("no-pds", RIGID), torch.Generator().manual_seed(0))
+    assert hasattr(no_pds, "velocity_mlp") and not hasattr(no_pds, "time")
+
+
+def test_a_fresh_model_is_the_still_canonical_scene():
+    # Zero heads (time network, velocity MLP, ADF): every ablation starts where it stands.
+    x0, q0, s0 = _canonical()
+    for ablation in ABLATIONS:
+        spec = _spec(ablation)
+        params = MotionParameters(spec, torch.Generator().manual_seed(1)).params()
+        for t in (0.0, 0.4, 1.3):
+            x, q, s, base = gaussians_at(params, spec, x0, q0, s0, t)
+            torch.testing.assert_close(x, x0, rtol=0, atol=1e-6)
+            torch.testing.assert_close(base, x0, rtol=0, atol=1e-6)
+            torch.testing.assert_close(q, q0, rtol=0, atol=1e-6)
+            torch.testing.assert_close(s, s0, rtol=0, atol=1e-7)
+
+
+def test_skipping_a_zero_adf_changes_nothing():
+    # What training does before adf_start (spec.without_adf) is exact while the ADF head is zero.
+    x0, q0, s0 = _canonical()
+    spec = _spec("full")
+    motion = MotionParameters(spec, torch.Generator().manual_seed(2))
+    with torch.no_grad():
+        motion.time[-1].normal_(generator=torch.Generator().manual_seed(3))
+    params = motion.params()
+    with_adf = gaussians_at(params, spec, x0, q0, s0, 0.6)
+    without = gaussians_at(params, spec.without_adf(), x0, q0, s0, 0.6)
+    for a, b in zip(with_adf, without):
+        torch.testing.assert_close(a, b, rtol=0, atol=1e-6)
+
+
+def test_mlp_velocity_moves_positions_only():
+    # A constant MLP velocity (zero weights, bias 0.5 along x): x = x0 + 0.5 t, q and s canonical.
+    x0, q0, s0 = _canonical()
+    spec = _spec("no-pds")
+    motion = MotionParameters(spec, torch.Generator().manual_seed(4))
+    with torch.no_grad():
+        motion.velocity_mlp[-1].copy_(torch.tensor([0.5, 0.0, 0.0]))
+    params = motion.params()
+    x, q, s, base = gaussians_at(params, spec.without_adf(), x0, q0, s0, 0.8)
+    torch.testing.assert_close(x, x0 + torch.tensor([0.4, 0.0, 0.0]), rtol=0, atol=1e-6)
+    assert torch.equal(q, q0) and torch.equal(s, s0) and torch.equal(x, base)
+    torch.testing.assert_close(velocity_at(params, spec, x0, 0.3), torch.tensor([0.5, 0.0, 0.0]).expand(16, 3))
+    r, div = motion_residuals(params, spec, x0, 0.3)  # constant v, no acceleration: r = 0, div = 0
+    assert div is None and torch.allclose(r, torch.zeros_like(r), atol=1e-6)
+
+
+def test_model_rejects_motion_that_does_not_match_its_spec():
+    x0, _, _ = _canonical()
+    gaussians = Gaussians.from_points(x0.numpy(), None, 0, 0.1)
+    with pytest.raises(ValueError, match="^motion: "):
+        VeloGaussModel(gaussians, None, _spec("full"))
+    static = VeloGaussModel(gaussians, None, _spec("full", STATIC))
+    means, quats, _, base = static.state_at(0.7)
+    assert torch.equal(means, gaussians.means) and torch.equal(base, gaussians.means)
+    assert torch.equal(static.velocity_at(x0, 0.2), torch.zeros_like(x0))

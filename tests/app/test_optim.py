@@ -1,0 +1,72 @@
+"""velogauss.train.optim: parameter groups, learning-rate schedules and the optimiser surgery of
+densification."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from velogauss.config import Config, ModelConfig, TrainConfig
+from velogauss.model import build_model
+from velogauss.model.gaussians import FIELDS
+from velogauss.model.profile import resolve_profile
+from velogauss.train.optim import make_optimizer, set_learning_rates, update_gaussian_groups
+
+SMALL = dict(n_freqs_x=1, n_freqs_adf_x=1, n_freqs_adf_t=1, code_dim=3, n_patterns=4, hidden=8, depth=1)
+TRAIN = TrainConfig(iterations=1000, warmup=200)
+EXTENT = 2.5
+
+
+def _model(effects=("translation", "gravity")):
+    cfg = Config(model=ModelConfig(**SMALL))
+    points = np.random.default_rng(0).uniform(-1, 1, (20, 3))
+    return build_model(cfg, resolve_profile(effects, False), points, None, np.random.default_rng(0))
+
+
+def test_every_parameter_is_in_exactly_one_named_group():
+    model = _model()
+    opt = make_optimizer(model, TRAIN, EXTENT)
+    names = [g["name"] for g in opt.param_groups]
+    assert names == list(FIELDS) + ["motion", "acc"]
+    grouped = [p for g in opt.param_groups for p in g["params"]]
+    assert len(grouped) == len({id(p) for p in grouped}) == len(list(model.parameters()))
+    assert opt.param_groups[-1]["params"] == [model.motion.acc]
+
+
+def test_no_acceleration_group_without_acceleration_and_no_motion_groups_when_static():
+    assert [g["name"] for g in make_optimizer(_model(("translation",)), TRAIN, EXTENT).param_groups][-1] == "motion"
+    assert [g["name"] for g in make_optimizer(_model(("static",)), TRAIN, EXTENT).param_groups] == list(FIELDS)
+
+
+def test_schedules_decay_log_linearly_between_their_ends():
+    opt = make_optimizer(_model(), TRAIN, EXTENT)
+
+    def lr(it):
+        set_learning_rates(opt, it, TRAIN, EXTENT)
+        return {g["name"]: g["lr"] for g in opt.param_groups}
+
+    start, middle, end = lr(0), lr(500), lr(1000)
+    assert start["means"] == pytest.approx(TRAIN.lr_means * EXTENT)
+    assert end["means"] == pytest.approx(TRAIN.lr_means_final * EXTENT)
+    assert middle["means"] == pytest.approx(math.sqrt(start["means"] * end["means"]))  # halfway in log space
+    # The motion rates run their decay from the warm-up's end; the acceleration's keeps its ratio.
+    assert lr(200)["motion"] == pytest.approx(TRAIN.lr_motion) and start["motion"] == pytest.approx(TRAIN.lr_motion)
+    assert end["motion"] == pytest.approx(TRAIN.lr_motion_final)
+    assert end["acc"] / end["motion"] == pytest.approx(TRAIN.lr_acc / TRAIN.lr_motion)
+    assert start["sh_dc"] == end["sh_dc"] == TRAIN.lr_sh and start["sh_rest"] == pytest.approx(TRAIN.lr_sh / 20)
+
+
+def test_update_keeps_the_kept_rows_moments_and_zeroes_the_new_ones():
+    model = _model()
+    opt = make_optimizer(model, TRAIN, EXTENT)
+    (model.gaussians.means.square().sum() + model.gaussians.sh_dc.sum()).backward()
+    opt.step()
+    before = opt.state[model.gaussians.means]["exp_avg"].clone()
+    keep = torch.arange(20) % 3 != 0
+    new_rows = {name: torch.zeros((2,) + getattr(model.gaussians, name).shape[1:]) for name in FIELDS}
+    update_gaussian_groups(opt, model.gaussians, keep, new_rows)
+    means = model.gaussians.means
+    assert means.shape == (int(keep.sum()) + 2, 3) and opt.param_groups[0]["params"][0] is means
+    moment = opt.state[means]["exp_avg"]
+    assert torch.equal(moment[:-2], before[keep]) and not moment[-2:].any()

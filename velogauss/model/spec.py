@@ -1,0 +1,117 @@
+"""The resolved description of a model's motion: config + scene profile + ablation, once.
+
+`resolve_motion_spec` turns the training config's model section, the scene's
+`MotionProfile` and the ablation (paper Table "ablation") into one frozen `MotionSpec`.
+The motion (`velogauss.model.motion.gaussians_at`), the model and the training loop read
+only this spec; no other layer re-derives which pieces run.
+
+| ablation     | velocity        | ADF | physics losses (GPC) |
+|--------------|-----------------|-----|----------------------|
+| full         | affine (PDS)    | yes | yes                  |
+| no-pds       | MLP v(γ(x), t)  | yes | yes                  |
+| no-adf       | affine (PDS)    | no  | yes                  |
+| no-gpc       | affine (PDS)    | yes | no                   |
+| deform-only  | none            | yes | no  (DefGS-style)    |
+
+Adding a training scheme: one more value of `Scheme`, resolved here, and one branch in
+`velogauss.model.motion.gaussians_at` (ARCHITECTURE.md).
+"""
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+from velogauss.model.profile import MotionProfile
+from velogauss_core.motion import Integrator, MotionConfig, VelocityKind
+
+Scheme = Literal["integrate"]
+# How the base state x*(t) comes from the velocity. "integrate": integrate positions (and,
+# with PDS, rotations and scales) from the canonical state at t = 0 (VG-TRAJ), then add the
+# ADF residual (VG-ADF-COMPOSE); the paper's scheme and the only one so far.
+SCHEMES: tuple[str, ...] = get_args(Scheme)
+
+
+@dataclass(frozen=True)
+class _Switches:
+    velocity: VelocityKind | None
+    adf: bool
+    gpc: bool
+
+
+# The paper's ablations as switches (module docstring's table).
+ABLATION_SWITCHES: dict[str, _Switches] = {
+    "full": _Switches("affine", True, True),
+    "no-pds": _Switches("mlp", True, True),
+    "no-adf": _Switches("affine", False, True),
+    "no-gpc": _Switches("affine", True, False),
+    "deform-only": _Switches(None, True, False),
+}
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """What the motion of one model computes, resolved once (see the module docstring).
+
+    scheme: how positions come from the velocity (`Scheme`);
+    moving: the scene moves at all (False: a static scene, no motion parameters, every
+      other field is then off);
+    velocity: "affine" (PDS: Phi(x) w(t, z) over config.mask, VG-VEL), "mlp" (no-pds) or None
+      (deform-only: x* = x0);
+    config: network sizes and the basis masks (velocity mask, acceleration mask);
+    acceleration: the VG-ACC polynomial Q is a parameter (else Q = 0);
+    integrator, step: VG-INTEG's method and largest step in normalised time;
+    adf: the ADF residual is built and applied (VG-ADF);
+    adf_clamp_time: the ADF's input time is min(t, this), or None (evaluated at every t);
+    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a velocity);
+    physics_loss: the VG-LOSS-PHYS transport residual on collocation points is on (GPC);
+    divergence: the VG-DIV term of the physics loss is on (incompressible motion).
+    """
+
+    scheme: Scheme
+    moving: bool
+    velocity: VelocityKind | None
+    config: MotionConfig
+    acceleration: bool
+    integrator: Integrator
+    step: float
+    adf: bool
+    adf_clamp_time: float | None
+    adf_loss: bool
+    physics_loss: bool
+    divergence: bool
+
+    def without_adf(self) -> "MotionSpec":
+        """This spec with the ADF skipped: what training runs before the ADF starts learning
+        (its last layer is still zero then, so skipping it is exactly the identity)."""
+        return dataclasses.replace(self, adf=False)
+
+
+def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> MotionSpec:
+    """The `MotionSpec` of a training config's model section (`velogauss.config.ModelConfig`),
+    a scene's `profile` and the end of the observed window `max_time`.
+
+    deform-only evaluates its ADF at every t (a DefGS-style model, as DefGS does); the
+    others hold it at max_time beyond the window when `model_cfg.adf_clamp_time`.
+    """
+    switches = ABLATION_SWITCHES[model_cfg.ablation]
+    moving = bool(profile.moving)
+    velocity = switches.velocity if moving else None
+    adf = moving and switches.adf
+    clamp = model_cfg.adf_clamp_time and model_cfg.ablation != "deform-only"
+    sizes = {f.name: getattr(model_cfg, f.name) for f in dataclasses.fields(MotionConfig)
+             if f.name not in ("mask", "acc_mask")}
+    return MotionSpec(
+        scheme="integrate",
+        moving=moving,
+        velocity=velocity,
+        config=MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask),
+        acceleration=moving and bool(profile.acceleration),
+        integrator=model_cfg.integrator,
+        step=float(model_cfg.step),
+        adf=adf,
+        adf_clamp_time=float(max_time) if clamp else None,
+        adf_loss=adf and velocity is not None,
+        physics_loss=switches.gpc and velocity is not None,
+        divergence=switches.gpc and velocity is not None and bool(profile.divergence),
+    )
+

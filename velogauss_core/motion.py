@@ -1,0 +1,107 @@
+"""The motion model's configuration and tables (spec/motion.md, "Parameters and configuration").
+
+One frozen `MotionConfig` is shared by `velogauss_ref` and `velogauss_fast`; each draws its
+parameter dict of this layout (`init_motion_params` in `velogauss_ref.motion.config` with
+NumPy, in `velogauss_fast.motion.params` with torch). Every list of choices is defined here
+once, as a `Literal` type and the tuple of its values.
+"""
+
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import numpy as np
+
+# Number of affine basis velocity fields, the columns of Phi (VG-BASIS).
+N_BASIS = 12
+# (dx 3, dq 4, ds 3) of VG-ADF.
+ADF_OUTPUTS = 10
+
+# Zero-based columns of Phi selected by each effect of a scene's profile (VG-BASIS,
+# "Column masks"); a column mask is the union of the groups a scene declares.
+COLUMN_GROUPS = {
+    "translation": (0, 1, 2),
+    "rotation": (3, 4, 5),
+    "stretch": (6, 7, 8),
+    "shear": (9, 10, 11),
+}
+
+Effect = Literal["translation", "rotation", "gravity", "stretch", "shear", "static"]
+# The effects a scene may declare (scene.json, --effects), in canonical order.
+EFFECTS: tuple[str, ...] = get_args(Effect)
+# The effects that select velocity basis columns (COLUMN_GROUPS).
+MOTION_EFFECTS: tuple[str, ...] = tuple(COLUMN_GROUPS)
+
+Integrator = Literal["euler", "rk2", "rk4"]
+# The fixed-step integrators of VG-INTEG.
+INTEGRATORS: tuple[str, ...] = get_args(Integrator)
+
+Ablation = Literal["full", "no-pds", "no-adf", "no-gpc", "deform-only"]
+# The paper's ablations (Table "ablation"): which of PDS, ADF and GPC a model keeps.
+ABLATIONS: tuple[str, ...] = get_args(Ablation)
+
+VelocityKind = Literal["affine", "mlp"]
+# How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP
+# v(gamma(x), t) (PDS off, "no-pds"); a model without velocity has None.
+VELOCITY_KINDS: tuple[str, ...] = get_args(VelocityKind)
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Sizes of the motion networks and the basis-column masks (spec/motion.md).
+
+    n_freqs_x: frequencies of gamma(x0) for the code encoder E (VG-CODE);
+    n_freqs_t: frequencies of gamma(t) for the time network (VG-COEF; 0 = raw t, which
+      extrapolates without periodicity);
+    n_freqs_adf_x, n_freqs_adf_t: frequencies of the ADF inputs (VG-ADF);
+    code_dim: L, the physics code size; n_patterns: K motion patterns;
+    hidden, depth: width and number of hidden layers of every MLP;
+    mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
+    acc_mask: None or 12 bools, the acceleration's columns (VG-ACC).
+    Masks are stored as tuples of bools so the config stays hashable and serialisable.
+    """
+
+    n_freqs_x: int = 4
+    n_freqs_t: int = 0
+    n_freqs_adf_x: int = 6
+    n_freqs_adf_t: int = 6
+    code_dim: int = 16
+    n_patterns: int = 32
+    hidden: int = 64
+    depth: int = 3
+    mask: tuple[bool, ...] | None = None
+    acc_mask: tuple[bool, ...] | None = None
+
+    def __post_init__(self):
+        for name in ("n_freqs_x", "n_freqs_t", "n_freqs_adf_x", "n_freqs_adf_t"):
+            _check_int(name, getattr(self, name), 0)
+        for name in ("code_dim", "n_patterns", "hidden", "depth"):
+            _check_int(name, getattr(self, name), 1)
+        for name in ("mask", "acc_mask"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, _check_mask(name, value))
+
+
+def network_shapes(cfg: MotionConfig) -> dict[str, tuple[int, int]]:
+    """(d_in, d_out) of each MLP of the parameter dict, by key; every MLP has `cfg.depth`
+    hidden layers of width `cfg.hidden`. "code" E (VG-CODE), "time" P(t) (VG-COEF), "adf" F
+    (VG-ADF) and "velocity_mlp", the unconstrained velocity v(gamma(x), t) of "no-pds"."""
+    L, K = cfg.code_dim, cfg.n_patterns
+    return {
+        "code": (3 * (1 + 2 * cfg.n_freqs_x), L),
+        "time": (1 + 2 * cfg.n_freqs_t, K * N_BASIS),
+        "adf": (3 * (1 + 2 * cfg.n_freqs_adf_x) + 1 + 2 * cfg.n_freqs_adf_t + L, ADF_OUTPUTS),
+        "velocity_mlp": (3 * (1 + 2 * cfg.n_freqs_x) + 1, 3),
+    }
+
+
+def _check_int(name, value, low):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+
+
+def _check_mask(name, value):
+    mask = np.asarray(value)
+    if mask.shape != (N_BASIS,) or mask.dtype != bool:
+        raise ValueError(f"{name}: expected {N_BASIS} booleans (VG-BASIS columns), got {value!r}")
+    return tuple(bool(m) for m in mask)
