@@ -17,11 +17,14 @@ read: one `vertex` element, `binary_little_endian`, every property `float`, in t
 """
 
 import numpy as np
+import torch
 
+from velogauss.data.ply import vertex_ply_bytes
 from velogauss.io_utils import to_numpy, write_bytes
+from velogauss_fast.quaternion import normalize_quat
 from velogauss_fast.sh import C0
 from velogauss_core.checks import check_array
-from velogauss_core.constants import EXPORT_OPACITY_CLAMP, QUAT_ZERO_NORM_SQ
+from velogauss_core.constants import EXPORT_OPACITY_CLAMP
 
 
 def ply_property_names(sh_degree):
@@ -39,8 +42,9 @@ def ply_property_names(sh_degree):
 def gaussians_to_table(means, quats, scales, opacities, colors, sh_degree):
     """The `(N, P)` float32 table of a 3DGS PLY (columns as `ply_property_names(sh_degree)`).
 
-    `means (N, 3)` world units; `quats (N, 4)` (w, x, y, z), any norm — normalised here, a
-    quaternion with `|q|² < QUAT_ZERO_NORM_SQ` is written as the identity (spec/conventions.md);
+    `means (N, 3)` world units; `quats (N, 4)` (w, x, y, z), any norm — normalised here by
+    `normalize_quat`, a quaternion with `|q|² < QUAT_ZERO_NORM_SQ` is written as the identity
+    (spec/conventions.md);
     `scales (N, 3)` standard deviations > 0; `opacities (N,)` in [0, 1], clamped to
     `[EXPORT_OPACITY_CLAMP, 1 − EXPORT_OPACITY_CLAMP]` before the logit so that fully
     transparent or opaque Gaussians stay finite; `colors (N, (D+1)², 3)` SH coefficients
@@ -68,9 +72,7 @@ def gaussians_to_table(means, quats, scales, opacities, colors, sh_degree):
     if np.any((opacities < 0) | (opacities > 1)):
         raise ValueError(f"opacities: expected values in [0, 1], found [{opacities.min():.3g}, {opacities.max():.3g}]")
 
-    norm_sq = np.sum(quats**2, axis=1, keepdims=True)
-    zero = norm_sq < QUAT_ZERO_NORM_SQ
-    unit = np.where(zero, np.array([1.0, 0.0, 0.0, 0.0]), quats / np.sqrt(np.where(zero, 1.0, norm_sq)))
+    unit = normalize_quat(torch.from_numpy(quats)).numpy()
     clamped = np.clip(opacities, EXPORT_OPACITY_CLAMP, 1.0 - EXPORT_OPACITY_CLAMP)
     logit = np.log(clamped) - np.log1p(-clamped)
     rest = colors[:, 1:n_coeffs, :].transpose(0, 2, 1).reshape(n, -1)  # channel-major, as 3DGS
@@ -87,10 +89,7 @@ def ply_bytes(table, sh_degree):
     table = np.ascontiguousarray(table, dtype="<f4")
     if table.ndim != 2 or table.shape[1] != len(names):
         raise ValueError(f"table: expected (N, {len(names)}) for sh_degree {sh_degree}, got {table.shape}")
-    header = ["ply", "format binary_little_endian 1.0", f"element vertex {table.shape[0]}"]
-    header += [f"property float {name}" for name in names]
-    header.append("end_header")
-    return ("\n".join(header) + "\n").encode("ascii") + table.tobytes()
+    return vertex_ply_bytes(table.view(np.dtype([(name, "<f4") for name in names])).reshape(-1))
 
 
 def export_ply(model, t, path):

@@ -31,7 +31,6 @@ import argparse
 import json
 import math
 import statistics
-import time
 from pathlib import Path
 from typing import NamedTuple
 
@@ -40,7 +39,7 @@ import torch
 from matplotlib.figure import Figure
 from scipy.spatial.transform import Rotation
 
-from velogauss.bench.harness import machine, regenerate_command, write_section
+from velogauss.bench.harness import machine, regenerate_command, timed_passes, write_section
 from velogauss.bench.motion import _leaves
 from velogauss.config import ModelConfig
 from velogauss.io_utils import save_figure
@@ -231,16 +230,7 @@ def _timings(p, method, h, repeats, device):
         sum((o * c).sum() for o, c in zip(_integrate(p, method, h), cot)).backward()
         sync()
 
-    return tuple(_median_time(fn, repeats) for fn in (forward, forward_backward))
-
-
-def _median_time(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return tuple(statistics.median(timed_passes(fn, repeats)) for fn in (forward, forward_backward))
 
 
 def observed_orders(results, steps, key):

@@ -26,12 +26,11 @@ Regenerate: python -m velogauss.bench.effects   (or: velogauss bench effects)
 
 import argparse
 import statistics
-import time
 
 import numpy as np
 import torch
 
-from velogauss.bench.harness import machine, regenerate_command, write_section
+from velogauss.bench.harness import machine, regenerate_command, timed_passes, write_section
 from velogauss.config import load_config
 from velogauss.model import build_model, resolve_profile
 from velogauss.model.motion import motion_residuals
@@ -63,18 +62,14 @@ def time_motion(model, repeats):
     params = [p for p in model.parameters() if p.requires_grad]
 
     def once():
-        total = 0.0
         for t in TIMES:
-            start = time.perf_counter()
             means, quats, scales, _ = model.state_at(t)
             loss = means.sum() + quats.sum() + scales.sum()
             if loss.requires_grad:
                 torch.autograd.grad(loss, [p for p in params if p.requires_grad], allow_unused=True)
-            total += time.perf_counter() - start
-        return total / len(TIMES)
 
     once()
-    return statistics.median(once() for _ in range(repeats))
+    return statistics.median(timed_passes(once, repeats)) / len(TIMES)
 
 
 def time_physics(model, profile, bounds, repeats, seed=0):
@@ -86,14 +81,12 @@ def time_physics(model, profile, bounds, repeats, seed=0):
     params = list(model.motion.parameters())
 
     def once():
-        start = time.perf_counter()
         r, div = motion_residuals(model.motion.params(), model.spec, x, 0.5)
         loss = r.square().mean() + (div.square().mean() if div is not None else 0.0)
         torch.autograd.grad(loss, params, allow_unused=True)
-        return time.perf_counter() - start
 
     once()
-    return statistics.median(once() for _ in range(repeats))
+    return statistics.median(timed_passes(once, repeats))
 
 
 def run(out_path="benchmarks/RESULTS.md", device="cpu", n_points=5000, repeats=5, threads=1, quick=False):

@@ -1,13 +1,28 @@
-"""What the benchmarks share: peak-memory measurement, the machine line, their RESULTS.md section."""
+"""What the benchmarks share: the timing loop, peak-memory measurement, the machine line, their
+RESULTS.md section."""
 
 import ctypes
 import os
 import platform
 import re
+import time
+from collections.abc import Callable
 
 import torch
 
 from velogauss.io_utils import write_text
+
+
+def timed_passes(step: Callable[[], object], repeats: int) -> list[float]:
+    """Wall seconds of each of `repeats` calls of `step` (perf_counter). The caller warms up
+    first and makes `step` wait for its device (torch.cuda.synchronize), so each time covers
+    the whole pass."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        step()
+        times.append(time.perf_counter() - t0)
+    return times
 
 
 def status_kib(field):

@@ -30,14 +30,13 @@ import math
 import statistics
 import subprocess
 import sys
-import time
 from typing import NamedTuple
 
 import numpy as np
 import torch
 from torch.func import jacrev, vmap
 
-from velogauss.bench.harness import machine, peak_above_mib, regenerate_command, reset_peak_memory, write_section
+from velogauss.bench.harness import machine, peak_above_mib, regenerate_command, reset_peak_memory, timed_passes, write_section
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
@@ -179,11 +178,7 @@ def _worker(case, repeats, device, threads, sizes):
     step = _workload(case, device, sizes)
     step()  # warm-up: allocator pools, lazy imports, one-time kernels
     baseline = reset_peak_memory(device)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        step()
-        times.append(time.perf_counter() - t0)
+    times = timed_passes(step, repeats)
     return {"case": case, "times": times, "median_s": statistics.median(times),
             "peak_mib": peak_above_mib(device, baseline), "threads": torch.get_num_threads()}
 

@@ -38,13 +38,12 @@ import math
 import statistics
 import subprocess
 import sys
-import time
 from dataclasses import dataclass
 
 import torch
 
 from velogauss.bench.harness import (machine, peak_above_mib, regenerate_command, reset_peak_memory, status_kib,
-                                      write_section)
+                                      timed_passes, write_section)
 from velogauss_fast.backends import gsplat_available
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
@@ -231,11 +230,7 @@ def _worker(method, workload, repeats, device, threads=0):
     image = step()  # warm-up: allocator pools, lazy imports, one-time kernels
     checksum = float(image.detach().double().sum())
     baseline = reset_peak_memory(device)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        step()
-        times.append(time.perf_counter() - t0)
+    times = timed_passes(step, repeats)
     return {
         "method": method,
         "workload": workload,
