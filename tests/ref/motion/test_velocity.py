@@ -63,13 +63,20 @@ def test_velocity_gradient(x, w, seed):
     check_grads_fd(velocity, (x, w), (0, 1), np.random.default_rng(seed))
 
 
-@pytest.mark.spec("VG-FIELD")
-@pytest.mark.parametrize("masked", [False, True])
+# The Eulerian field (masked or not) and the no-pds MLP velocity, by the same gradient check.
+FIELDS = [
+    pytest.param(velocity_field, random_params, None, marks=pytest.mark.spec("VG-FIELD"), id="field"),
+    pytest.param(velocity_field, random_params, RIGID_MASK, marks=pytest.mark.spec("VG-FIELD"), id="field-masked"),
+    pytest.param(mlp_velocity, mlp_velocity_params, None, marks=pytest.mark.spec("VG-VEL-MLP"), id="mlp"),
+]
+
+
+@pytest.mark.parametrize("field, draw_params, mask", FIELDS)
 @given(seed=seeds, x=hnp.arrays(np.float64, (3, 3), elements=st.floats(-1.5, 1.5)), t=st.floats(-3, 3))
-def test_velocity_field_gradient(masked, seed, x, t):
-    cfg = small_cfg(mask=RIGID_MASK if masked else None)
-    theta, unflatten = flat_params(random_params(seed, cfg))
-    check_grads_fd(lambda theta, x, t: velocity_field(unflatten(theta), x, t, cfg), (theta, x, t), (0, 1, 2),
+def test_velocity_field_gradient(field, draw_params, mask, seed, x, t):
+    cfg = small_cfg(mask=mask)
+    theta, unflatten = flat_params(draw_params(seed, cfg))
+    check_grads_fd(lambda theta, x, t: field(unflatten(theta), x, t, cfg), (theta, x, t), (0, 1, 2),
                    np.random.default_rng(seed), step=FD_STEP)
 
 
@@ -106,11 +113,3 @@ def test_mlp_velocity_is_the_mlp_of_encoded_position_and_time():
     expected = h @ layers[-1][0] + layers[-1][1]
     np.testing.assert_allclose(mlp_velocity(params, x, t, cfg)[0], expected, rtol=1e-12, atol=1e-14)
 
-
-@pytest.mark.spec("VG-VEL-MLP")
-@given(seed=seeds, x=hnp.arrays(np.float64, (3, 3), elements=st.floats(-1.5, 1.5)), t=st.floats(-3, 3))
-def test_mlp_velocity_gradient(seed, x, t):
-    cfg = small_cfg()
-    theta, unflatten = flat_params(mlp_velocity_params(seed, cfg))
-    check_grads_fd(lambda theta, x, t: mlp_velocity(unflatten(theta), x, t, cfg), (theta, x, t), (0, 1, 2),
-                   np.random.default_rng(seed), step=FD_STEP)
