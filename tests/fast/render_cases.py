@@ -9,17 +9,20 @@
   depth ties), computed with the reference's own functions; `projection_doubt`, the
   Gaussians whose validity or integer radius sits within such a band;
 - `render_gradients`: gradients of a whole render, reference (autograd) or fast (torch).
-Agreement is scale-relative: max |fast - ref| <= rtol * max |ref| per output, since an
-elementwise relative error is meaningless at entries near zero. (tests/fast/motion/cases.py
-has the same three checks for parameter dicts; these take plain arrays only.)
+The three checks are tests/agreement.py's (shared with the motion tests), with the
+rendering functions' gradient floor and gradcheck tolerances.
 """
+
+import functools
 
 import numpy as np
 import torch
 from autograd import make_vjp
 from autograd.builtins import tuple as ag_tuple
-from hypothesis import HealthCheck, settings
 
+from tests import agreement
+from tests.agreement import (DEVICE_SETTINGS, RTOL32, RTOL64, assert_close, check_float32,  # noqa: F401
+                             to_numpy, to_torch)
 from tests.ref.cameras import intrinsics, rigid_viewmat, to_world
 from velogauss_fast.raster import rasterize as fast_rasterize
 from velogauss_core.constants import (
@@ -35,120 +38,11 @@ from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.projection import project_gaussians
 from velogauss_ref.raster import rasterize as ref_rasterize
 
-# float64: the same formulas up to reassociation (matrix products, sums of a few terms):
-# a few ulps of the largest intermediate, so 1e-9 leaves ~1e5 headroom and still catches
-# any formula error (1e-3 and up).
-RTOL64 = 1e-9
-# float32 vs the float64 reference: eps32 = 6e-8 times the condition of a few chained
-# steps; observed below 1e-5 of the output scale for every function here.
-RTOL32 = 1e-4
-
-# The `device` fixture is function-scoped but constant per run: safe under hypothesis.
-DEVICE_SETTINGS = settings(
-    suppress_health_check=[*settings.default.suppress_health_check, HealthCheck.function_scoped_fixture]
-)
-
-
-def to_torch(x, dtype=torch.float64, device="cpu", requires_grad=False):
-    return torch.tensor(np.asarray(x, dtype=np.float64), dtype=dtype, device=device, requires_grad=requires_grad)
-
-
-def to_numpy(x):
-    return x.detach().cpu().double().numpy()
-
-
-def assert_close(actual, expected, rtol, name="", mask=None, floor=0.0):
-    """max |actual - expected| <= rtol * max(max |expected|, floor) over `mask` (all if None).
-
-    `floor` is the scale below which values count as zero (gradients that vanish
-    identically come out as rounding noise of ~1e-16 in both implementations).
-    """
-    a = to_numpy(actual) if isinstance(actual, torch.Tensor) else np.asarray(actual, dtype=np.float64)
-    e = np.asarray(expected, dtype=np.float64)
-    assert a.shape == e.shape, f"{name}: shape {a.shape} != {e.shape}"
-    assert np.all(np.isfinite(a)), f"{name}: non-finite values"
-    if mask is not None:
-        a, e = a[mask], e[mask]
-    if e.size == 0:
-        return
-    scale = max(float(np.max(np.abs(e))), floor, 1e-300)
-    err = float(np.max(np.abs(a - e)))
-    assert err <= rtol * scale, f"{name}: max abs error {err:.3e} > {rtol:.1e} * max|ref| {scale:.3e}"
-
-
-def _tuple(out):
-    return out if isinstance(out, tuple) else (out,)
-
-
-def check_agreement(ref_fn, fast_fn, args, diff, device, seed=0, rtol=RTOL64, grad_rtol=RTOL64, floor=0.0):
-    """Fast vs reference in float64: outputs, then gradients w.r.t. args[i], i in diff.
-
-    args: NumPy arrays (converted) or static values (passed as they are); floor: the
-    output scale below which values count as zero (see `assert_close`).
-    """
-    t_args = [to_torch(a, device=device, requires_grad=i in diff) if isinstance(a, np.ndarray) else a
-              for i, a in enumerate(args)]
-    out_f, out_r = _tuple(fast_fn(*t_args)), _tuple(ref_fn(*args))
-    assert len(out_f) == len(out_r)
-    for k, (f, r) in enumerate(zip(out_f, out_r)):
-        assert f.dtype == torch.float64 and f.device.type == torch.device(device).type
-        assert_close(f, r, rtol, name=f"output {k}", floor=floor)
-    if not diff:
-        return
-    rng = np.random.default_rng(seed)
-    cot = tuple(rng.standard_normal(np.shape(r)) for r in out_r)
-
-    def ref_selected(selected):
-        full = list(args)
-        for i, a in zip(diff, selected):
-            full[i] = a
-        out = ref_fn(*full)
-        # A plain tuple of boxes is invisible to autograd (it would report zero
-        # gradients); its own tuple type is traced.
-        return ag_tuple(out) if isinstance(out, tuple) else out
-
-    vjp, _ = make_vjp(ref_selected)(tuple(args[i] for i in diff))
-    g_ref = vjp(cot if len(cot) > 1 else cot[0])
-    total = sum((f * to_torch(c, device=device)).sum() for f, c in zip(out_f, cot))
-    g_fast = torch.autograd.grad(total, [t_args[i] for i in diff], allow_unused=True)
-    for i, gf, gr in zip(diff, g_fast, g_ref):
-        gf = torch.zeros_like(t_args[i]) if gf is None else gf
-        # Unit floor: these functions and cotangents are O(1), so are nonzero gradients.
-        assert_close(gf, np.asarray(gr), grad_rtol, name=f"gradient of argument {i}", floor=1.0)
-
-
-def check_float32(ref_fn, fast_fn, args, device, rtol=RTOL32, floor=0.0):
-    """Fast in float32 vs the reference in float64 (outputs only; floor as in check_agreement).
-
-    The floor is at least float32's smallest normal number over rtol: values below it are
-    zero or denormal in float32 (a scale of 1e-89 squares to 0), so only an absolute error
-    of that size is asked of them.
-    """
-    floor = max(floor, float(np.finfo(np.float32).tiny) / rtol)
-    t_args = [to_torch(a, torch.float32, device) if isinstance(a, np.ndarray) else a for a in args]
-    out_f, out_r = _tuple(fast_fn(*t_args)), _tuple(ref_fn(*args))
-    for k, (f, r) in enumerate(zip(out_f, out_r)):
-        assert f.dtype == torch.float32
-        assert_close(f, r, rtol, name=f"float32 output {k}", floor=floor)
-
-
-def gradcheck_fn(fast_fn, args, diff, device, fast_mode=False):
-    """torch.autograd.gradcheck of fast_fn in float64 w.r.t. args[i], i in diff.
-
-    Callers keep the inputs away from every threshold of fast_fn (clamps, culling,
-    skips): finite differences step 1e-6 across them. fast_mode checks <u, J v> for
-    random u, v instead of the whole Jacobian (for functions with many outputs).
-    """
-    t_args = [to_torch(a, device=device) if isinstance(a, np.ndarray) else a for a in args]
-    leaves = [t_args[i].clone().requires_grad_() for i in diff]
-
-    def fn(*xs):
-        full = list(t_args)
-        for i, x in zip(diff, xs):
-            full[i] = x
-        return fast_fn(*full)
-
-    assert torch.autograd.gradcheck(fn, tuple(leaves), eps=1e-6, atol=1e-6, rtol=1e-5, fast_mode=fast_mode)
+# Unit gradient floor: the rendering functions and their cotangents are O(1), so are their
+# nonzero gradients; identically vanishing ones come out as rounding noise.
+check_agreement = functools.partial(agreement.check_agreement, grad_floor=1.0)
+# Every column of the Jacobian by default (these functions have few inputs), to 1e-6 / 1e-5.
+gradcheck_fn = functools.partial(agreement.gradcheck_fn, fast_mode=False, atol=1e-6, rtol=1e-5)
 
 
 # --- scenes ----------------------------------------------------------------------------
