@@ -15,7 +15,9 @@ from hypothesis import strategies as st
 
 from tests.fast.render_cases import assert_close, random_scene, scene_to_torch, to_numpy
 from tests.fast.test_raster import composite_and_gradients, composite_inputs
+from velogauss_fast import composite as compositing
 from velogauss_fast import raster
+from velogauss_fast.spans import SPAN_COLUMNS, pair_table, row_spans
 from velogauss_fast.backends import numba_kernels
 from velogauss_fast.backends.numba_backend import CompositeNumba, _parameters
 from velogauss_fast.covariance import covariance_3d
@@ -27,7 +29,7 @@ def spans_of(scene, dtype=torch.float64):
     t = scene_to_torch(scene, dtype, "cpu")
     proj = project_gaussians(t["means"], covariance_3d(t["quats"], t["scales"]), t["viewmat"], t["K"],
                              scene["width"], scene["height"])
-    spans = raster._row_spans(proj["mean2d"], proj["conic"], t["opacities"], proj["radius"], proj["depth"],
+    spans = row_spans(proj["mean2d"], proj["conic"], t["opacities"], proj["radius"], proj["depth"],
                               proj["valid"], scene["width"], scene["height"])
     return proj, t, spans
 
@@ -41,7 +43,7 @@ def test_kernels_visit_the_pair_tables_pairs(seed, dtype, n_parts):
                          scale_px=(0.05, 8.0), margin=10.0)
     scene["scales"][::3, 2] = 1e-9
     proj, t, spans = spans_of(scene, dtype)
-    pairs = raster._pair_table(spans)
+    pairs = pair_table(spans)
     prm = _parameters(t["colors"], spans).numpy()
     counts = np.zeros(n_parts, dtype=np.int64)
     numba_kernels.count_pairs(n_parts, prm, scene["width"], counts)
@@ -67,7 +69,7 @@ def test_numba_matches_the_torch_backends_analytic_backward(seed):
     leaves, pairs = composite_inputs(scene, "cpu")
     _, _, spans = spans_of(scene)
     assert len(pairs.gid) > 2000
-    out_t, grads_t = composite_and_gradients(raster._Composite.apply, leaves, pairs, seed)
+    out_t, grads_t = composite_and_gradients(compositing.Composite.apply, leaves, pairs, seed)
     out_n, grads_n = composite_and_gradients(lambda *xs: CompositeNumba.apply(*xs[:5], spans), leaves, spans, seed)
     # Forward: T as a running product (numba) or exp of float64 log sums (torch), alphas
     # from the exp recurrence: observed <= 4e-14 of the largest entry over seeds 0-5.
@@ -77,8 +79,8 @@ def test_numba_matches_the_torch_backends_analytic_backward(seed):
     for name, a, b in zip(("mean2d", "conic", "opacity", "rgb", "background"), grads_n, grads_t):
         assert_close(a, to_numpy(b), 1e-11, name=f"gradient of {name}", floor=1.0)
     # The cases are exercised: clamped alphas and pixels stopped early.
-    alpha = raster._pair_alpha(raster._gaussian_columns(*(x.detach() for x in leaves[:4])),
-                               raster._pixel_centres(20, 16, torch.float64, "cpu"), pairs.gid, pairs.pix)
+    alpha = compositing.pair_alpha(compositing.gaussian_columns(*(x.detach() for x in leaves[:4])),
+                               compositing.pixel_centres(20, 16, torch.float64, "cpu"), pairs.gid, pairs.pix)
     assert (alpha == ALPHA_MAX).any() and (out_t[1] < 1e-3).any()
 
 
@@ -138,10 +140,10 @@ def test_numba_refuses_cuda_tensors():
 
 
 def test_kernel_columns_follow_the_span_columns():
-    # The kernels index spans.geom by position: a reordering in raster.py must show here.
+    # The kernels index spans.geom by position: a reordering in spans.py must show here.
     named = {"u": "U", "v": "V", "a": "CA", "b": "CB", "c": "CC", "opacity": "OPACITY", "two_as": "TWO_AS",
              "det": "DET", "inv_a": "INV_A", "b_over_a": "B_OVER_A", "definite": "DEFINITE", "x0": "X0",
              "x1": "X1", "y0": "Y0", "y1": "Y1"}
-    assert [getattr(numba_kernels, named[c]) for c in raster.SPAN_COLUMNS] == list(range(len(raster.SPAN_COLUMNS)))
+    assert [getattr(numba_kernels, named[c]) for c in SPAN_COLUMNS] == list(range(len(SPAN_COLUMNS)))
     assert (numba_kernels.RED, numba_kernels.GREEN, numba_kernels.BLUE) == tuple(
-        range(len(raster.SPAN_COLUMNS), numba_kernels.N_COLUMNS))
+        range(len(SPAN_COLUMNS), numba_kernels.N_COLUMNS))

@@ -34,7 +34,8 @@ from tests.fast.render_cases import (
 )
 from tests.ref.cameras import in_view, intrinsics
 from tests.ref.test_raster import alpha_margin, alphas_in_range, splats, transmittance_margin, unit_colors
-from velogauss_fast import raster
+from velogauss_fast import composite as compositing
+from velogauss_fast.spans import SPAN_COLUMNS, pair_table, row_spans
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
 from velogauss_fast.raster import blend, rasterize, splat_alpha
@@ -306,9 +307,9 @@ def composite_inputs(scene, device):
     t = scene_to_torch(scene, torch.float64, device)
     proj = project_gaussians(t["means"], covariance_3d(t["quats"], t["scales"]), t["viewmat"], t["K"],
                              scene["width"], scene["height"])
-    spans = raster._row_spans(proj["mean2d"], proj["conic"], t["opacities"], proj["radius"], proj["depth"],
+    spans = row_spans(proj["mean2d"], proj["conic"], t["opacities"], proj["radius"], proj["depth"],
                               proj["valid"], scene["width"], scene["height"])
-    pairs = raster._pair_table(spans)
+    pairs = pair_table(spans)
     leaves = [x.detach().clone().requires_grad_() for x in (proj["mean2d"], proj["conic"], t["opacities"],
                                                              t["colors"], to_torch(scene["background"], device=device))]
     return leaves, pairs
@@ -334,16 +335,16 @@ def test_analytic_backward_matches_autograd(device, monkeypatch, chunk_pairs, se
     scene["background"] = rng.uniform(size=3)
     leaves, pairs = composite_inputs(scene, device)
     if chunk_pairs is not None:
-        monkeypatch.setattr(raster, "_CHUNK_PAIRS", chunk_pairs)
-        assert len(raster._chunks(pairs.offsets, chunk_pairs)) > 10
-    cols = raster._gaussian_columns(*(x.detach() for x in leaves[:4]))
-    centres = raster._pixel_centres(scene["width"], scene["height"], torch.float64, device)
-    alpha = raster._pair_alpha(cols, centres, pairs.gid, pairs.pix)
-    _, blended, _ = raster._transmittance(alpha, pairs.offsets[1:] - pairs.offsets[:-1])
+        monkeypatch.setattr(compositing, "CHUNK_PAIRS", chunk_pairs)
+        assert len(compositing.chunks(pairs.offsets, chunk_pairs)) > 10
+    cols = compositing.gaussian_columns(*(x.detach() for x in leaves[:4]))
+    centres = compositing.pixel_centres(scene["width"], scene["height"], torch.float64, device)
+    alpha = compositing.pair_alpha(cols, centres, pairs.gid, pairs.pix)
+    _, blended, _ = compositing.transmittance(alpha, pairs.offsets[1:] - pairs.offsets[:-1])
     assert ((alpha > 0) & ~blended).any() and (alpha == ALPHA_MAX).any()  # the cases are exercised
 
-    out_a, grads_a = composite_and_gradients(raster._Composite.apply, leaves, pairs, seed)
-    out_b, grads_b = composite_and_gradients(raster._composite_autograd, leaves, pairs, seed)
+    out_a, grads_a = composite_and_gradients(compositing.Composite.apply, leaves, pairs, seed)
+    out_b, grads_b = composite_and_gradients(compositing.composite_autograd, leaves, pairs, seed)
     # Forward: the same operations, bit for bit. Backward: the analytic one reassociates
     # per-pixel and per-Gaussian sums, then divides by 1 - alpha >= 0.01: observed <= 2e-14
     # of the largest entry (the opacity's, -s0 / o, the worst).
@@ -364,7 +365,7 @@ def exact_log_transmittance(alphas):
 
 @pytest.mark.spec("VG-BLEND")
 def test_transmittance_prefix_sums_are_exact_on_long_runs_in_a_full_chunk(device):
-    # One chunk as long as _CHUNK_PAIRS: 10^5 pixels of 10 opaque pairs (the chunk's sum of
+    # One chunk as long as CHUNK_PAIRS: 10^5 pixels of 10 opaque pairs (the chunk's sum of
     # |log(1 - alpha)| reaches 4.6e6, whose float64 ulp is 1e-9), then 5 pixels of 600
     # faint pairs whose T crosses TRANSMITTANCE_MIN near their end, between empty pixels.
     rng = np.random.default_rng(11)
@@ -373,8 +374,8 @@ def test_transmittance_prefix_sums_are_exact_on_long_runs_in_a_full_chunk(device
     alpha = np.concatenate([np.full(n_opaque * opaque_run, ALPHA_MAX), *faint])
     counts = np.concatenate([np.full(n_opaque, opaque_run), [0, faint_run, 0, faint_run, faint_run, 0, faint_run,
                                                              faint_run]])
-    assert len(alpha) >= raster._CHUNK_PAIRS * 0.95
-    T, blended, _ = raster._transmittance(to_torch(alpha, device=device), to_torch(counts, torch.int64, device))
+    assert len(alpha) >= compositing.CHUNK_PAIRS * 0.95
+    T, blended, _ = compositing.transmittance(to_torch(alpha, device=device), to_torch(counts, torch.int64, device))
     log_T, blended = np.log(to_numpy(T)), blended.cpu().numpy()
 
     exact = np.concatenate([np.tile(exact_log_transmittance(alpha[:opaque_run]), n_opaque),
@@ -401,7 +402,7 @@ def test_hundreds_of_stacked_gaussians_match_the_reference(device, monkeypatch, 
     if which == "numba" and device != "cpu":
         pytest.skip("numba is CPU only")
     if chunk_pairs is not None:
-        monkeypatch.setattr(raster, "_CHUNK_PAIRS", chunk_pairs)  # chunks of two pixels
+        monkeypatch.setattr(compositing, "CHUNK_PAIRS", chunk_pairs)  # chunks of two pixels
     rng = np.random.default_rng(12)
     n, K = 300, intrinsics(10.0, 10.0, 1.5, 1.0)
     z = rng.uniform(2.0, 8.0, n)
@@ -438,7 +439,7 @@ def test_chunking_does_not_change_the_render(device, monkeypatch):
     scene = random_scene(rng, 40, 16, 12, scale_px=(1.0, 4.0), opacity=(0.2, 1.0))
     scene["background"] = rng.uniform(size=3)
     _, pairs = composite_inputs(scene, device)
-    assert len(raster._chunks(pairs.offsets, 97)) >= 10
+    assert len(compositing.chunks(pairs.offsets, 97)) >= 10
     cot_image, cot_alpha = rng.standard_normal((12, 16, 3)), rng.standard_normal((12, 16, 1))
     t_scene = scene_to_torch(scene, torch.float64, device)
 
@@ -447,7 +448,7 @@ def test_chunking_does_not_change_the_render(device, monkeypatch):
         return image, alpha, render_gradients(scene, cot_image, cot_alpha, device, "torch")
 
     image, alpha, grads = render()
-    monkeypatch.setattr(raster, "_CHUNK_PAIRS", 97)
+    monkeypatch.setattr(compositing, "CHUNK_PAIRS", 97)
     image_c, alpha_c, grads_c = render()
     # Only the float64 prefix sums' rounding depends on where chunks start: ~1e-16.
     assert_close(image_c, to_numpy(image), 1e-13)

@@ -8,7 +8,7 @@ Methods, all on the same random scenes (float32, CPU unless --device says otherw
                table, analytic backward (any device);
 * gsplat    -- rasterize(backend="gsplat"): gsplat's CUDA kernels (CUDA with gsplat only);
 * autograd  -- the torch backend's projection, pair table and compositing left to
-               autograd (velogauss_fast.raster._composite_plain_autograd): what the
+               autograd (velogauss_fast.raster.COMPOSITES["autograd"]): what the
                formulation costs without a hand-written backward;
 * dense     -- a straightforward all-pairs renderer: every Gaussian at every pixel as
                dense (P, N) tensors, the approach of simple pure-torch splatting code
@@ -154,10 +154,10 @@ def _renderer(method):
 
         return lambda **s: rasterize(**s, backend=method)[:2]
     if method == "autograd":
-        from velogauss_fast.raster import _composite_plain_autograd, _render
+        from velogauss_fast.raster import COMPOSITES, render_with_composite
 
-        return lambda **s: _render(**s, background=s["means"].new_zeros(3), sh_degree=None,
-                                   composite=_composite_plain_autograd)[:2]
+        return lambda **s: render_with_composite(**s, background=s["means"].new_zeros(3), sh_degree=None,
+                                                 composite=COMPOSITES["autograd"])[:2]
     if method == "dense":
         return lambda **s: dense_rasterize(**s)[:2]
     if method == "reference":

@@ -50,9 +50,9 @@ class CompositeNumba(torch.autograd.Function):
     """Per-pixel front-to-back compositing of VG-RENDER's pairs in the numba kernels.
 
     Inputs mean2d (N, 2), conic (N, 3), opacity (N,), rgb (N, 3), background (3,) and
-    spans (velogauss_fast.raster._Spans, CPU); outputs image (P, 3) and final
+    spans (velogauss_fast.spans.Spans, CPU); outputs image (P, 3) and final
     transmittance T (P,), P = height * width, in the working dtype. Same outputs and
-    gradients as velogauss_fast.raster._Composite up to rounding.
+    gradients as velogauss_fast.composite.Composite up to rounding.
     """
 
     @staticmethod

@@ -15,7 +15,7 @@ own per-Gaussian gradient rows; the caller sums the parts in a fixed order, so r
 not depend on scheduling.
 
 Row `rank` of `prm` (float64, (n, N_COLUMNS)) describes the Gaussian of depth rank
-`rank`, columns as named below. Row spans follow velogauss_fast.raster._row_spans: the
+`rank`, columns as named below. Row spans follow velogauss_fast.spans.row_spans: the
 same float64 operations in the same order, so both backends visit the same pairs.
 """
 
@@ -25,7 +25,7 @@ import numba
 
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
-# Columns of `prm`: velogauss_fast.raster.SPAN_COLUMNS (mean, conic, opacity, row spans),
+# Columns of `prm`: velogauss_fast.spans.SPAN_COLUMNS (mean, conic, opacity, row spans),
 # then the colour.
 U, V, CA, CB, CC, OPACITY, TWO_AS, DET, INV_A, B_OVER_A, DEFINITE, X0, X1, Y0, Y1 = range(15)
 RED, GREEN, BLUE = range(15, 18)
