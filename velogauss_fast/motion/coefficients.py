@@ -25,27 +25,30 @@ def coefficients(params, t, z, cfg):
 
 
 def _coefficients(params, t, z, cfg):
-    return _masked(_mixing(params, z) @ _patterns(params, t, cfg), cfg.mask)
+    return masked(mixing_weights(params, z) @ motion_patterns(params, t, cfg), cfg.mask)
 
 
-def _mixing(params, z):
+def mixing_weights(params, z):
+    """m(z) = softmax(z A + c): (N, L) codes -> (N, K) weights (VG-COEF). Unchecked: callers
+    (`coefficients`, the trajectory, the residuals) have validated z."""
     A, c = params["mix"][0]
     return torch.softmax(z @ A + c, dim=-1)  # [N, K]
 
 
-def _patterns(params, t, cfg):
-    return _patterns_at(params, time_tensor(t, params["time"][0][0]), cfg)[0]  # [K, 12]
+def motion_patterns(params, t, cfg):
+    """P(t) (K, 12): the K motion patterns at the scalar time t (VG-COEF). Unchecked."""
+    return motion_patterns_at(params, time_tensor(t, params["time"][0][0]), cfg)[0]  # [K, 12]
 
 
-def _patterns_at(params, times, cfg):
+def motion_patterns_at(params, times, cfg):
     """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them."""
     out = _mlp(params["time"], _encode(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
     return out.reshape(times.shape[0], -1, 12)
 
 
-def _masked(w, mask):
-    """w with the columns outside `mask` (cfg.mask or cfg.acc_mask) set to exactly zero
-    (identity when mask is None)."""
+def masked(w, mask):
+    """w (..., 12) with the columns outside `mask` (cfg.mask or cfg.acc_mask) set to exactly
+    zero (identity when mask is None). Unchecked."""
     if mask is None:
         return w
     mask = torch.as_tensor(np.asarray(mask, dtype=bool), device=w.device)

@@ -6,7 +6,7 @@ Twin of `velogauss_ref.motion.trajectory` (spec/motion.md, VG-TRAJ).
 import torch
 
 from velogauss_fast.checks import check_array
-from velogauss_fast.motion.coefficients import _mixing, _patterns_at
+from velogauss_fast.motion.coefficients import mixing_weights, motion_patterns_at
 from velogauss_fast.motion.integrate import integrate, stage_times
 from velogauss_fast.motion.rates import axis_products, rate_plan, rotmat, state_rates
 from velogauss_fast.motion.scalars import check_time, times_tensor
@@ -64,8 +64,8 @@ def _stage_coefficients(params, z, taus, columns, cfg):
     Equal to `coefficients(...)` restricted to the mask's columns (the others are exactly 0):
     P at all S times from one run of the time network, then one matrix product with m(z).
     """
-    m = _mixing(params, z)  # [N, K], constant along the path: the code is frozen
-    P = _patterns_at(params, times_tensor(taus, params["time"][0][0]), cfg)  # [S, K, 12]
+    m = mixing_weights(params, z)  # [N, K], constant along the path: the code is frozen
+    P = motion_patterns_at(params, times_tensor(taus, params["time"][0][0]), cfg)  # [S, K, 12]
     index = torch.tensor(columns, dtype=torch.long, device=m.device)
     P = P.index_select(2, index).transpose(1, 2).reshape(len(taus) * len(columns), m.shape[1])  # [S a, K]
     return (P @ m.T).split(len(columns))

@@ -5,7 +5,7 @@ Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC).
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.code import _code
-from velogauss_fast.motion.coefficients import _masked, _mixing
+from velogauss_fast.motion.coefficients import masked, mixing_weights
 from velogauss_fast.motion.scalars import check_time
 from velogauss_fast.motion.velocity import _velocity
 
@@ -21,12 +21,12 @@ def acceleration_field(params, x, t, cfg):
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    return _acceleration(params, x, t, _mixing(params, _code(params, x, cfg)), cfg)
+    return _acceleration(params, x, t, mixing_weights(params, _code(params, x, cfg)), cfg)
 
 
 def _acceleration(params, x, t, m, cfg):
     """a at x for mixing weights m (N, K) already evaluated at x."""
-    return _velocity(x, _masked(m @ _acc_patterns(params["acc"], t), cfg.acc_mask))
+    return _velocity(x, masked(m @ _acc_patterns(params["acc"], t), cfg.acc_mask))
 
 
 def _acc_patterns(Q, t):

@@ -20,7 +20,7 @@ from torch.func import jvp, vmap
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.basis import _affine
 from velogauss_fast.motion.code import _code
-from velogauss_fast.motion.coefficients import _masked, _mixing, _patterns
+from velogauss_fast.motion.coefficients import masked, mixing_weights, motion_patterns
 from velogauss_fast.motion.scalars import check_time, time_tensor
 from velogauss_fast.motion.velocity import _mlp_velocity, _velocity
 from velogauss_fast.physics.acceleration import _acceleration, acceleration_field
@@ -38,12 +38,12 @@ def transport_residual(params, x, t, cfg):
     P, dP_dt = _patterns_and_rate(params, t, cfg, x)
     m_of_x = _mixing_of_x(params, cfg)
     m = m_of_x(x)
-    w = _masked(m @ P, cfg.mask)
+    w = masked(m @ P, cfg.mask)
     v = _velocity(x, w)
     _, dm_v = jvp(m_of_x, (x,), (v,))  # d m / d x along v, [N, K]
     A, _ = _affine(w)
-    grad_v_v = (A * v[:, None, :]).sum(-1) + _velocity(x, _masked(dm_v @ P, cfg.mask))
-    dv_dt = _velocity(x, _masked(m @ dP_dt, cfg.mask))
+    grad_v_v = (A * v[:, None, :]).sum(-1) + _velocity(x, masked(dm_v @ P, cfg.mask))
+    dv_dt = _velocity(x, masked(m @ dP_dt, cfg.mask))
     return dv_dt + grad_v_v - _acceleration(params, x, t, m, cfg)
 
 
@@ -81,25 +81,25 @@ def _velocity_jet(params, x, t, cfg):
     # One JVP per coordinate axis, vmapped: the primal m is computed once, the three
     # tangents dm/dx_j (3, N, K) together.
     m, dm_dx = vmap(lambda e: jvp(m_of_x, (x,), (e,)), out_dims=(None, 0))(axes)
-    w = _masked(m @ P, cfg.mask)
+    w = masked(m @ P, cfg.mask)
     A, _ = _affine(w)
     # Column j of grad v: A(w) e_j + Phi(x) dw/dx_j.
-    dv_code = _velocity(x, _masked(dm_dx @ P, cfg.mask))  # [3, N, 3], indexed [j, n, i]
+    dv_code = _velocity(x, masked(dm_dx @ P, cfg.mask))  # [3, N, 3], indexed [j, n, i]
     grad_v = A + dv_code.permute(1, 2, 0)
     v = _velocity(x, w)
-    dv_dt = _velocity(x, _masked(m @ dP_dt, cfg.mask))
+    dv_dt = _velocity(x, masked(m @ dP_dt, cfg.mask))
     return v, dv_dt, grad_v, m
 
 
 def _mixing_of_x(params, cfg):
     """x (N, 3) -> m(E(gamma(x))) (N, K): the only path through which w depends on x."""
-    return lambda x: _mixing(params, _code(params, x, cfg))
+    return lambda x: mixing_weights(params, _code(params, x, cfg))
 
 
 def _patterns_and_rate(params, t, cfg, like):
     """P(t) and dP/dt (both (K, 12)) from one JVP of the time network."""
     t0 = time_tensor(t, like).reshape(())
-    return jvp(lambda s: _patterns(params, s, cfg), (t0,), (torch.ones_like(t0),))
+    return jvp(lambda s: motion_patterns(params, s, cfg), (t0,), (torch.ones_like(t0),))
 
 
 def mlp_residuals(params, x, t, cfg, with_divergence=False):
