@@ -32,7 +32,10 @@ composite those pairs (a third, gsplat, lives in backends/gsplat_backend.py):
     the benchmark times both (and numba).
 """
 
+from typing import Literal, get_args
+
 import torch
+from torch import Tensor
 
 from velogauss_core.checks import check_degree, check_size
 from velogauss_core.constants import TRANSMITTANCE_MIN
@@ -44,7 +47,8 @@ from velogauss_fast.projection import project_gaussians
 from velogauss_fast.sh import sh_to_color, viewing_directions
 from velogauss_fast.spans import pair_table, row_spans
 
-_BACKENDS = ("auto", "torch", "numba", "gsplat")
+Backend = Literal["auto", "torch", "numba", "gsplat"]
+_BACKENDS = get_args(Backend)
 
 
 def splat_alpha(pixel, mean2d, conic, opacity):
@@ -86,19 +90,19 @@ def blend(colors, alphas, background):
 
 
 def rasterize(
-    means,
-    quats,
-    scales,
-    opacities,
-    colors,
-    viewmat,
-    K,
-    width,
-    height,
-    background=None,
-    sh_degree=None,
-    backend="auto",
-):
+    means: Tensor,  # [N, 3]
+    quats: Tensor,  # [N, 4]
+    scales: Tensor,  # [N, 3]
+    opacities: Tensor,  # [N]
+    colors: Tensor,  # [N, 3] or [N, K, 3]
+    viewmat: Tensor,  # [4, 4]
+    K: Tensor,  # [3, 3]
+    width: int,
+    height: int,
+    background: Tensor | None = None,  # [3]
+    sh_degree: int | None = None,
+    backend: Backend = "auto",
+) -> tuple[Tensor, Tensor, dict]:
     """Render one image of N Gaussians, gsplat-style (VG-RENDER).
 
     means (N, 3), quats (N, 4) (w, x, y, z), scales (N, 3) standard deviations,

@@ -9,7 +9,7 @@ from velogauss.model.dynamic import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
 from velogauss.model.motion import MotionParameters, gaussians_at, motion_residuals, velocity_at
 from velogauss.model.profile import resolve_profile
-from velogauss.model.spec import resolve_motion_spec
+from velogauss.model.spec import ABLATION_SWITCHES, resolve_motion_spec
 from velogauss_core.motion import ABLATIONS
 
 RIGID = resolve_profile(("translation", "rotation"), False)
@@ -51,6 +51,10 @@ def test_each_ablation_resolves_to_its_row_of_the_table(ablation, velocity, adf,
     # deform-only is DefGS-style: its ADF sees every t; the others hold it at max_time.
     assert spec.adf_clamp_time == (None if ablation == "deform-only" else 0.75)
     assert spec.config.mask == INCOMPRESSIBLE.mask and spec.config.code_dim == SMALL["code_dim"]
+
+
+def test_every_ablation_has_exactly_one_row():
+    assert tuple(ABLATION_SWITCHES) == ABLATIONS
 
 
 def test_a_static_scene_resolves_to_no_motion_and_no_losses():

@@ -7,7 +7,8 @@ import numpy as np
 
 from velogauss_ref.covariance import covariance_3d
 from velogauss_ref.motion.code import physics_code
-from velogauss_ref.motion.integrate import METHODS, integrate
+from velogauss_core.motion import INTEGRATORS as METHODS
+from velogauss_ref.motion.integrate import integrate
 from velogauss_ref.motion.rotscale import rotscale_rates
 from velogauss_ref.motion.trajectory import base_state
 from velogauss_ref.motion.velocity import velocity

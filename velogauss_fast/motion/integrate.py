@@ -8,12 +8,11 @@ import math
 
 import torch
 
+from velogauss_core.motion import INTEGRATORS, Integrator
 from velogauss_fast.motion.scalars import check_time
 
-METHODS = ("euler", "rk2", "rk4")
 
-
-def integrate(f, y0, t0, t1, h, method):
+def integrate(f, y0: torch.Tensor, t0, t1, h, method: Integrator) -> torch.Tensor:
     """y(t1) from y(t0) = y0 and dy/dt = f(y, t) with fixed steps (VG-INTEG).
 
     f: callable (y (..., D), t) -> (..., D); y0: (..., D) tensor; t0, t1: scalar times
@@ -35,7 +34,7 @@ def integrate(f, y0, t0, t1, h, method):
     return y
 
 
-def stage_times(t0, t1, h, method):
+def stage_times(t0, t1, h, method: Integrator) -> list:
     """The times at which `integrate(f, y0, t0, t1, h, method)` calls f, in call order (VG-INTEG).
 
     A list of n * stages entries (1, 2 or 4 stages per step), each computed exactly as
@@ -54,8 +53,8 @@ def _schedule(t0, t1, h, method):
     check_time("h", h)
     if float(h) <= 0:
         raise ValueError(f"h: expected a positive step size, got {float(h)!r}")
-    if method not in METHODS:
-        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    if method not in INTEGRATORS:
+        raise ValueError(f"method: expected one of {INTEGRATORS}, got {method!r}")
     n = max(1, math.ceil(abs(float(t1) - float(t0)) / float(h)))
     return n, (t1 - t0) / n
 

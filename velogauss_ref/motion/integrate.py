@@ -7,9 +7,8 @@ import math
 
 from autograd.tracer import getval
 
+from velogauss_core.motion import INTEGRATORS
 from velogauss_ref.checks import check_array, check_scalar
-
-METHODS = ("euler", "rk2", "rk4")
 
 
 def integrate(f, y0, t0, t1, h, method):
@@ -28,8 +27,8 @@ def integrate(f, y0, t0, t1, h, method):
     check_scalar("h", h)
     if not getval(h) > 0:
         raise ValueError(f"h: expected a positive step size, got {getval(h)!r}")
-    if method not in METHODS:
-        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    if method not in INTEGRATORS:
+        raise ValueError(f"method: expected one of {INTEGRATORS}, got {method!r}")
     check_array("y0", y0)
     # The step count is piecewise constant in t0 and t1: it carries no derivative.
     n = max(1, math.ceil(abs(float(getval(t1)) - float(getval(t0))) / float(getval(h))))
