@@ -5,6 +5,7 @@ tensor for all particles; only the time steps are a Python loop.
 """
 
 import math
+from typing import NamedTuple
 
 import torch
 
@@ -24,13 +25,17 @@ def integrate(f, y0: torch.Tensor, t0, t1, h, method: Integrator) -> torch.Tenso
     t0 + k dt (+ stage offsets), and carry t0's and t1's autograd graph when they are tensors.
     Raises ValueError for h <= 0, a non-finite time or h, or an unknown method.
     """
-    n, dt = _schedule(t0, t1, h, method)
+    return integrate_schedule(f, y0, schedule(t0, t1, h, method))
+
+
+def integrate_schedule(f, y0: torch.Tensor, sched: "Schedule") -> torch.Tensor:
+    """`integrate` along a schedule computed once by `schedule` (shared with `Schedule.stage_times`)."""
     if not isinstance(y0, torch.Tensor):
         raise ValueError(f"y0: expected a torch.Tensor, got {type(y0).__name__}")
-    step = _STEPS[method]
+    step = _STEPS[sched.method]
     y = y0
-    for k in range(n):
-        y = step(f, y, t0 + k * dt, dt)
+    for k in range(sched.n):
+        y = step(f, y, sched.t0 + k * sched.dt, sched.dt)
     return y
 
 
@@ -42,12 +47,25 @@ def stage_times(t0, t1, h, method: Integrator) -> list:
     caller can evaluate what f needs at every stage at once, before integrating.
     Raises ValueError as `integrate` does.
     """
-    n, dt = _schedule(t0, t1, h, method)
-    return [tau for k in range(n) for tau in _STAGE_TIMES[method](t0 + k * dt, dt)]
+    return schedule(t0, t1, h, method).stage_times()
 
 
-def _schedule(t0, t1, h, method):
-    """(n, dt): n = max(1, ceil(|t1 - t0| / h)) steps of dt = (t1 - t0) / n, after validating."""
+class Schedule(NamedTuple):
+    """The fixed steps of one integration: n steps of dt from t0 with `method` (VG-INTEG)."""
+
+    t0: object  # number or 0-d tensor
+    n: int
+    dt: object  # (t1 - t0) / n: number or 0-d tensor
+    method: Integrator
+
+    def stage_times(self) -> list:
+        """The times at which the integration calls f, in call order (see `stage_times`)."""
+        return [tau for k in range(self.n) for tau in _STAGE_TIMES[self.method](self.t0 + k * self.dt, self.dt)]
+
+
+def schedule(t0, t1, h, method: Integrator) -> Schedule:
+    """n = max(1, ceil(|t1 - t0| / h)) steps of dt = (t1 - t0) / n from t0, after validating
+    t0, t1, h and method (ValueError naming the argument)."""
     check_time("t0", t0)
     check_time("t1", t1)
     check_time("h", h)
@@ -56,7 +74,7 @@ def _schedule(t0, t1, h, method):
     if method not in INTEGRATORS:
         raise ValueError(f"method: expected one of {INTEGRATORS}, got {method!r}")
     n = max(1, math.ceil(abs(float(t1) - float(t0)) / float(h)))
-    return n, (t1 - t0) / n
+    return Schedule(t0, n, (t1 - t0) / n, method)
 
 
 def _euler(f, y, t, dt):

@@ -7,7 +7,7 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.coefficients import mixing_weights, motion_patterns_at
-from velogauss_fast.motion.integrate import integrate, stage_times
+from velogauss_fast.motion.integrate import integrate_schedule, schedule
 from velogauss_fast.motion.rates import axis_products, rate_plan, rotmat, state_rates
 from velogauss_fast.motion.scalars import check_time, times_tensor
 from velogauss_fast.quaternion import normalize_quat
@@ -37,7 +37,8 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         raise ValueError("s0: expected positive scales")
     check_array("z", z, (n, params["mix"][0][0].shape[0]))
     check_time("t", t)
-    taus = stage_times(0.0, t, h, method)
+    sched = schedule(0.0, t, h, method)  # once: the stage times and the integration share it
+    taus = sched.stage_times()
     plan = rate_plan(cfg.mask, x0.dtype, x0.device)
     lay = plan.layout
     if not lay.columns:
@@ -51,7 +52,7 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         return state_rates(plan, next(stage_w), y, RR0)
 
     parts = [x0.T] + [q0.T] * lay.rotation + [torch.log(s0).T] * lay.strain
-    y = integrate(rates, torch.cat(parts), 0.0, t, h, method)  # [rows, N], component-major
+    y = integrate_schedule(rates, torch.cat(parts), sched)  # [rows, N], component-major
     q = y[3:7].T if lay.rotation else q0
     s = torch.exp(y[lay.width:].T) if lay.strain else s0
     return y[:3].T, normalize_quat(q), s
