@@ -178,6 +178,26 @@ def config_from_dict(tree, source="config"):
     return cfg
 
 
+# What `--resume` may change: how long to train (the learning-rate decay then stretches to the
+# new end), on which device, how often to log and checkpoint, and where the scene folder now
+# lies. Every other key shapes the model, its losses or its schedule, so a change would
+# make the checkpoint disagree with config.toml (or fail to load into the model).
+RESUME_SAFE_KEYS = ("train.iterations", "train.device", "train.eval_every", "train.checkpoint_every", "data.dir")
+
+
+def check_resume_config(saved, cfg):
+    """Raise ValueError naming the first key, its old and new value, where `cfg` differs from
+    the config `saved` in a run's checkpoint other than in RESUME_SAFE_KEYS."""
+    old, new = config_to_dict(saved), config_to_dict(cfg)
+    for section, values in old.items():
+        for key, value in values.items():
+            name = f"{section}.{key}"
+            if name not in RESUME_SAFE_KEYS and new[section][key] != value:
+                raise ValueError(f"--resume: {name}: the run was trained with {value!r}, got {new[section][key]!r}; "
+                                 f"only {', '.join(RESUME_SAFE_KEYS)} may change on resume (start a new run with "
+                                 "another --out to change it)")
+
+
 def to_toml(cfg):
     """The config as TOML text (one table per section)."""
     lines = []

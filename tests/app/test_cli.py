@@ -73,7 +73,7 @@ def test_render_run_dir_without_checkpoint(tmp_path):
 
 @pytest.mark.parametrize("time", ["nan", "inf", "soon"])
 def test_export_bad_time(tmp_path, time):
-    assert_bad_input(invoke("export", tmp_path, "--time", time), "t:", time)
+    assert_bad_input(invoke("export", tmp_path, "--time", time), "--time:", time)
 
 
 def test_eval_bad_split(tmp_path):
