@@ -24,6 +24,7 @@ from typing import List, Optional
 
 import typer
 
+from velogauss.config import EFFECTS, Ablation, load_config
 from velogauss.data import DataError
 from velogauss.io_utils import check_writable
 
@@ -118,8 +119,8 @@ def train_command(
     set_: List[str] = typer.Option([], "--set", "-s", help=_SET_HELP),
     scene: Optional[str] = typer.Option(None, help="Synthetic scene to generate when DATA_DIR is omitted [default: the default scene]."),
     effects: Optional[str] = typer.Option(
-        None, help="Comma-separated effects the motion model may use: translation,rotation,gravity,stretch,shear,static."),
-    ablation: Optional[str] = typer.Option(None, help="full | no-pds | no-adf | no-gpc | deform-only."),
+        None, help=f"Comma-separated effects the motion model may use: {','.join(EFFECTS)}."),
+    ablation: Optional[Ablation] = typer.Option(None, help="Which of the paper's components to switch off."),
     iterations: Optional[int] = typer.Option(None, help="Training iterations."),
     resume: bool = typer.Option(
         False, "--resume", help="Continue the run in --out from its latest checkpoint; only train.iterations, "
@@ -140,8 +141,8 @@ def train_command(
     from velogauss.scenes import DEFAULT_SCENE
 
     with user_errors():
-        overrides = train_overrides(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
-                                    half_res=half_res, background=background, device=device)
+        flags = train_flags(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
+                            half_res=half_res, background=background, device=device)
         cfg_source = config
         if resume and overwrite:
             raise ValueError("--resume and --overwrite: choose one (continue the run, or replace it)")
@@ -157,7 +158,7 @@ def train_command(
             _refuse_existing_run(run_dir)
         if data_dir is None and scene is None and resume:
             data_dir = _recorded_data_dir(run_dir)
-        cfg = build_config(cfg_source, overrides + list(set_))
+        cfg = build_config(cfg_source, set_, flags)
         check_device(cfg.train.device, "train.device")
         check_writable(run_dir)
         if overwrite:
@@ -309,16 +310,16 @@ def export_command(
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion", "accuracy", "effects")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export")
 
 
 @app.command("bench")
 def bench_command(
-    which: str = typer.Argument(..., help="raster | motion | accuracy | effects."),
+    which: str = typer.Argument(..., help="raster | motion | accuracy | effects | export."),
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):
-    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy or .effects) and record it in RESULTS.md."""
+    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy, .effects or .export) and record it in RESULTS.md."""
     with user_errors():
         if which not in BENCHMARKS:
             raise ValueError(f"WHICH: expected one of {', '.join(BENCHMARKS)}, got {which!r}")
@@ -345,24 +346,21 @@ def walkthrough_command(
 
 # --- helpers shared by the commands ----------------------------------------------------
 
-def train_overrides(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
-                    device=None):
-    """The `--set`-style overrides `KEY=VALUE` that the real `train` flags stand for (None: not given).
-
-    Raises ValueError naming the flag for a malformed `--background` or `--effects`.
+def train_flags(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
+                device=None):
+    """The config values the `train` flags given stand for: {"section.key": (flag, value)}
+    (flags left at None are not given). Raises ValueError naming `--background` when malformed.
     """
     pairs = {
-        "model.effects": None if effects is None else _effects_list(effects),
-        "model.ablation": ablation,
-        "train.iterations": iterations,
-        "data.max_time": max_time,
-        "data.half_res": half_res,
-        "data.background": None if background is None else list(parse_background(background)),
-        "train.device": device,
+        "model.effects": ("--effects", None if effects is None else [e.strip() for e in effects.split(",")]),
+        "model.ablation": ("--ablation", ablation),
+        "train.iterations": ("--iterations", iterations),
+        "data.max_time": ("--max-time", max_time),
+        "data.half_res": ("--half-res", half_res),
+        "data.background": ("--background", None if background is None else parse_background(background)),
+        "train.device": ("--device", device),
     }
-    from velogauss.config import toml_value
-
-    return [f"{key}={toml_value(value)}" for key, value in pairs.items() if value is not None]
+    return {key: pair for key, pair in pairs.items() if pair[1] is not None}
 
 
 def parse_background(text):
@@ -384,23 +382,12 @@ def default_run_dir(scene_name, now=None):
     return Path("runs") / f"{scene_name}-{stamp}"
 
 
-def _effects_list(text):
-    from velogauss.scenes import EFFECTS
-
-    names = [e.strip() for e in text.split(",") if e.strip()]
-    unknown = [e for e in names if e not in EFFECTS]
-    if unknown or not names:
-        raise ValueError(f"--effects: unknown effect(s) {unknown or [text]}; choose from {', '.join(EFFECTS)}")
-    return names
-
-
-def build_config(path, overrides):
-    """The training config: defaults, then the TOML file `path` (if any), then `overrides`."""
+def build_config(path, overrides, flags=None):
+    """The training config: defaults, then the TOML file `path` (if any), then `overrides`
+    (["section.key=value"]), then the train `flags` (as `train_flags` returns them)."""
     if path is not None:
         _existing_file(path, "config file")
-    from velogauss.config import load_config
-
-    return load_config(path, overrides)
+    return load_config(path, overrides, flags)
 
 
 def with_data_dir(cfg, data_dir):
@@ -412,8 +399,6 @@ def with_data_dir(cfg, data_dir):
 
 def _recorded_data_dir(run_dir):
     """The scene folder a run was trained on, from `RUN_DIR/config.toml`."""
-    from velogauss.config import load_config
-
     cfg = load_config(_existing_file(Path(run_dir) / "config.toml", "run config"))
     if not cfg.data.dir:
         raise ValueError(f"{Path(run_dir) / 'config.toml'}: data.dir: empty; pass the scene folder with --data")

@@ -273,6 +273,27 @@ def test_failure_before_the_first_checkpoint_leaves_no_run_folder(scene, tmp_pat
     assert not (tmp_path / "run").exists()
 
 
+# --- 8. config ranges ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("setting", ["train.seed=-1", "train.lr_means=-1", "physics.bounds_margin=-5",
+                                     "physics.lambda_transport=-1e3", "train.lr_opacity=-1",
+                                     "densify.grad_threshold=-1", "densify.prune_opacity=2", "densify.until=-5",
+                                     "densify.static_every=-1", "densify.opacity_reset_every=-1", "physics.ramp=-1",
+                                     "train.iterations=0", "model.step=0", "data.max_time=1.5"])
+def test_out_of_range_config_values_name_the_key(scene, tmp_path, setting):
+    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--set", setting)
+    assert_refused(result, "--set", setting.split("=")[0], "got")
+    assert not (tmp_path / "run").exists()
+
+
+def test_out_of_range_value_in_a_config_file_names_file_and_key(scene, tmp_path):
+    config = tmp_path / "my.toml"
+    config.write_text("[densify]\nprune_opacity = 2.0\n")
+    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--config", config)
+    assert_refused(result, config, "densify.prune_opacity")
+    assert config.read_text() == "[densify]\nprune_opacity = 2.0\n" and not (tmp_path / "run").exists()
+
+
 # --- 9. checkpoint integrity ----------------------------------------------------------------
 
 def _payload(run):
@@ -365,6 +386,12 @@ def test_one_bit_pngs_are_read(scene, tmp_path):
     result = invoke("train", bits, "--out", tmp_path / "run", "--no-eval", "--iterations", 1)
     assert result.exit_code == 0, result.output
     assert snapshot(bits) == before
+
+
+def test_max_time_nan_names_the_flag(scene, tmp_path):
+    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--max-time", "nan")
+    assert_refused(result, "--max-time", "nan")
+    assert not (tmp_path / "run").exists()
 
 
 def test_render_of_a_zero_velocity_field_warns_nothing(scene, tmp_path):

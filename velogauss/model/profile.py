@@ -19,10 +19,10 @@ rotation, gravity, stretch, shear, static) and whether its motion is incompressi
 
 from dataclasses import dataclass
 
+from velogauss.config import EFFECTS as ALL_EFFECTS
 from velogauss_ref.motion.basis import COLUMN_GROUPS
 
 MOTION_EFFECTS = ("translation", "rotation", "stretch", "shear")
-ALL_EFFECTS = ("translation", "rotation", "gravity", "stretch", "shear", "static")
 
 
 @dataclass(frozen=True)

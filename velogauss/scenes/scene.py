@@ -12,11 +12,10 @@ unambiguous there.
 
 import numpy as np
 
+from velogauss.config import EFFECTS  # the one list of effects (re-exported by velogauss.scenes)
 from velogauss.scenes.bodies import body_from_dict
 from velogauss.scenes.raycast import render_rgba, shade, world_normal
 from velogauss_ref.checks import check_array, check_scalar
-
-EFFECTS = ("translation", "rotation", "gravity", "stretch", "shear", "static")
 
 
 class AnalyticScene:
