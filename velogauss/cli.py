@@ -6,21 +6,27 @@ Every command writes into one run folder (`runs/<scene>-<YYYYmmdd-HHMMSS>` by de
 Results are written atomically (`velogauss.io_utils`).
 
 Bad input -- a missing run folder, checkpoint or image, a malformed scene file, an unknown
-`--set` key, a bad value -- prints one line `error: <what is wrong, naming the file, field
-or value>` and exits with code 2. Only the command-line boundary catches these errors
-(`DataError`, `ValueError`, `FileNotFoundError`); anything else is a bug and keeps its traceback.
+`--set` key, a bad value, a device this machine lacks, an output folder that cannot be written
+or a full disk -- prints one line `error: <what is wrong, naming the file, field or value>`
+and exits with code 2. Only the command-line boundary catches these errors (`DataError`,
+`ValueError`, `OSError`); anything else is a bug and keeps its traceback. Outputs are checked
+for writability before any work starts. Ctrl-C during training prints where the checkpoint
+is and exits with code 130.
 """
 
 import contextlib
 import datetime
 import importlib
 import inspect
+import shutil
 from pathlib import Path
 from typing import List, Optional
 
 import typer
 
+from velogauss.config import EFFECTS, Ablation, load_config
 from velogauss.data import DataError
+from velogauss.io_utils import check_writable
 
 app = typer.Typer(
     name="velogauss",
@@ -34,6 +40,7 @@ app = typer.Typer(
 )
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # the shell's code for a process ended by SIGINT
 BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
 SPLIT_CHOICES = {"interp": ("interpolation",), "extrap": ("extrapolation",), "both": ("interpolation", "extrapolation")}
 
@@ -49,7 +56,7 @@ def user_errors():
     """Turn bad-input exceptions into one `error: ...` line on stderr and exit code 2."""
     try:
         yield
-    except FileNotFoundError as err:
+    except OSError as err:  # FileNotFoundError, a read-only or full disk: name the path
         where = f": {err.filename}" if err.filename else ""
         _fail(f"{err.strerror or err}{where}")
     except (DataError, ValueError) as err:
@@ -112,10 +119,14 @@ def train_command(
     set_: List[str] = typer.Option([], "--set", "-s", help=_SET_HELP),
     scene: Optional[str] = typer.Option(None, help="Synthetic scene to generate when DATA_DIR is omitted [default: the default scene]."),
     effects: Optional[str] = typer.Option(
-        None, help="Comma-separated effects the motion model may use: translation,rotation,gravity,stretch,shear,static."),
-    ablation: Optional[str] = typer.Option(None, help="full | no-pds | no-adf | no-gpc | deform-only."),
+        None, help=f"Comma-separated effects the motion model may use: {','.join(EFFECTS)}."),
+    ablation: Optional[Ablation] = typer.Option(None, help="Which of the paper's components to switch off."),
     iterations: Optional[int] = typer.Option(None, help="Training iterations."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its latest checkpoint."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the run in --out from its latest checkpoint; only train.iterations, "
+                                 "train.device, train.eval_every, train.checkpoint_every and data.dir may change."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Start a new run in an --out that already holds one, "
+                                                              "replacing its config, log and checkpoint."),
     max_time: Optional[float] = typer.Option(None, help="End of the observed window; later frames are the future [default 0.75]."),
     half_res: Optional[bool] = typer.Option(None, "--half-res/--full-res", help="Halve the image resolution."),
     background: Optional[str] = typer.Option(None, help="white | black | R,G,B in [0, 1]."),
@@ -123,13 +134,18 @@ def train_command(
     evaluate: bool = typer.Option(True, "--eval/--no-eval", help="Evaluate and render after training."),
     lpips_weights: Optional[Path] = typer.Option(None, help=_LPIPS_HELP),
 ):
-    """Train VeloGauss on a scene, then evaluate interpolation and extrapolation and render the results."""
+    """Train VeloGauss on a scene, then evaluate interpolation and extrapolation and render the results.
+
+    --out must be a new folder (or one without a run) unless --resume continues the run in it
+    or --overwrite replaces it."""
     from velogauss.scenes import DEFAULT_SCENE
 
     with user_errors():
-        overrides = train_overrides(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
-                                    half_res=half_res, background=background, device=device)
+        flags = train_flags(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
+                            half_res=half_res, background=background, device=device)
         cfg_source = config
+        if resume and overwrite:
+            raise ValueError("--resume and --overwrite: choose one (continue the run, or replace it)")
         if resume:
             if out is None:
                 raise ValueError("--resume: needs --out RUN_DIR, the run to continue")
@@ -138,9 +154,16 @@ def train_command(
             raise FileNotFoundError(2, "scene folder not found", str(data_dir))
         scene_name = scene or DEFAULT_SCENE
         run_dir = out or default_run_dir(data_dir.name if data_dir is not None else scene_name)
+        if not resume and not overwrite:
+            _refuse_existing_run(run_dir)
         if data_dir is None and scene is None and resume:
             data_dir = _recorded_data_dir(run_dir)
-        cfg = build_config(cfg_source, overrides + list(set_))
+        cfg = build_config(cfg_source, set_, flags)
+        check_device(cfg.train.device, "train.device")
+        check_writable(run_dir)
+        if overwrite:
+            _remove_run(run_dir)
+    with user_errors(), _no_half_made_run(run_dir, fresh=not resume):
         if data_dir is None:
             data_dir = run_dir / "data"
             if not (data_dir / "transforms_train.json").is_file():
@@ -151,12 +174,57 @@ def train_command(
         typer.echo(f"training on {data_dir} ({len(data.train)} train frames) -> {run_dir}")
         from velogauss.train.loop import train
 
-        model = train(cfg, data, run_dir, resume=resume, progress=True)
+        try:
+            model = train(cfg, data, run_dir, resume=resume, progress=True)
+        except KeyboardInterrupt as err:
+            typer.secho(str(err) or "training interrupted", err=True, fg=typer.colors.YELLOW)
+            raise typer.Exit(EXIT_INTERRUPTED) from None
     if not evaluate:
         typer.echo(f"run folder: {run_dir}")
         return
     with user_errors():
         _eval_and_render(run_dir, model, cfg, data, lpips_weights)
+
+
+# What a run folder holds (velogauss.train.loop): a folder with any of these is a run.
+_RUN_FILES = ("config.toml", "log.jsonl", "checkpoints")
+# What `--overwrite` removes before training: the run and what eval, render and export wrote
+# into it. The scene folder (data/) stays: it may be the very scene being trained on.
+_RUN_OUTPUTS = _RUN_FILES + ("metrics.json", "metrics.md", "renders", "export")
+
+
+def _remove_run(run_dir, names=_RUN_OUTPUTS):
+    for name in names:
+        path = Path(run_dir) / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def _refuse_existing_run(run_dir):
+    found = [name for name in _RUN_FILES if (Path(run_dir) / name).exists()]
+    if found:
+        raise ValueError(f"{run_dir}: already holds a run ({', '.join(found)}); continue it with --resume, "
+                         "choose a new --out, or pass --overwrite to replace it")
+
+
+@contextlib.contextmanager
+def _no_half_made_run(run_dir, fresh):
+    """On any failure before the first checkpoint of a new run, remove what it created: the
+    whole folder when it did not exist before, else the run files written into it."""
+    from velogauss.train.checkpoint import checkpoint_path
+
+    existed = Path(run_dir).exists()
+    try:
+        yield
+    except BaseException:
+        if fresh and not checkpoint_path(run_dir).is_file():
+            if not existed:
+                shutil.rmtree(run_dir, ignore_errors=True)
+            else:
+                _remove_run(run_dir, _RUN_FILES)
+        raise
 
 
 def _make_default_scene(name, data_dir):
@@ -188,6 +256,7 @@ def eval_command(
     with user_errors():
         if split not in SPLIT_CHOICES:
             raise ValueError(f"--split: expected one of {', '.join(SPLIT_CHOICES)}, got {split!r}")
+        check_writable(run_dir, "metrics.json", "metrics.md")
         model, cfg = load_run_model(run_dir, device)
         scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
         result = run_evaluation(run_dir, model, scene, SPLIT_CHOICES[split], lpips_weights)
@@ -210,9 +279,10 @@ def render_command(
     with user_errors():
         if not fps > 0:
             raise ValueError(f"--fps: expected a positive number, got {fps!r}")
+        out = out or run_dir / "renders"
+        check_writable(out)
         model, cfg = load_run_model(run_dir, device)
         scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
-        out = out or run_dir / "renders"
         written = run_render(out, model, scene, fps=fps, label=labels)
     typer.echo(f"wrote {len(written)} files to {out}")
 
@@ -230,25 +300,26 @@ def export_command(
     from velogauss.export import check_time, export_ply
 
     with user_errors():
-        t = check_time(time)
-        model, _ = load_run_model(run_dir, device)
+        t = check_time(time, "--time")
         out = out or run_dir / "export" / f"gaussians_t{t:.3f}.ply"
+        check_writable(out.parent, out.name)
+        model, _ = load_run_model(run_dir, device)
         count = export_ply(model, t, out)
     typer.echo(f"wrote {count} Gaussians at t={t:g} to {out}")
 
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion", "accuracy", "effects")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export")
 
 
 @app.command("bench")
 def bench_command(
-    which: str = typer.Argument(..., help="raster | motion | accuracy | effects."),
+    which: str = typer.Argument(..., help="raster | motion | accuracy | effects | export."),
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):
-    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy or .effects) and record it in RESULTS.md."""
+    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy, .effects or .export) and record it in RESULTS.md."""
     with user_errors():
         if which not in BENCHMARKS:
             raise ValueError(f"WHICH: expected one of {', '.join(BENCHMARKS)}, got {which!r}")
@@ -275,24 +346,21 @@ def walkthrough_command(
 
 # --- helpers shared by the commands ----------------------------------------------------
 
-def train_overrides(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
-                    device=None):
-    """The `--set`-style overrides `KEY=VALUE` that the real `train` flags stand for (None: not given).
-
-    Raises ValueError naming the flag for a malformed `--background` or `--effects`.
+def train_flags(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
+                device=None):
+    """The config values the `train` flags given stand for: {"section.key": (flag, value)}
+    (flags left at None are not given). Raises ValueError naming `--background` when malformed.
     """
     pairs = {
-        "model.effects": None if effects is None else _effects_list(effects),
-        "model.ablation": ablation,
-        "train.iterations": iterations,
-        "data.max_time": max_time,
-        "data.half_res": half_res,
-        "data.background": None if background is None else list(parse_background(background)),
-        "train.device": device,
+        "model.effects": ("--effects", None if effects is None else [e.strip() for e in effects.split(",")]),
+        "model.ablation": ("--ablation", ablation),
+        "train.iterations": ("--iterations", iterations),
+        "data.max_time": ("--max-time", max_time),
+        "data.half_res": ("--half-res", half_res),
+        "data.background": ("--background", None if background is None else parse_background(background)),
+        "train.device": ("--device", device),
     }
-    from velogauss.config import toml_value
-
-    return [f"{key}={toml_value(value)}" for key, value in pairs.items() if value is not None]
+    return {key: pair for key, pair in pairs.items() if pair[1] is not None}
 
 
 def parse_background(text):
@@ -314,23 +382,12 @@ def default_run_dir(scene_name, now=None):
     return Path("runs") / f"{scene_name}-{stamp}"
 
 
-def _effects_list(text):
-    from velogauss.scenes import EFFECTS
-
-    names = [e.strip() for e in text.split(",") if e.strip()]
-    unknown = [e for e in names if e not in EFFECTS]
-    if unknown or not names:
-        raise ValueError(f"--effects: unknown effect(s) {unknown or [text]}; choose from {', '.join(EFFECTS)}")
-    return names
-
-
-def build_config(path, overrides):
-    """The training config: defaults, then the TOML file `path` (if any), then `overrides`."""
+def build_config(path, overrides, flags=None):
+    """The training config: defaults, then the TOML file `path` (if any), then `overrides`
+    (["section.key=value"]), then the train `flags` (as `train_flags` returns them)."""
     if path is not None:
         _existing_file(path, "config file")
-    from velogauss.config import load_config
-
-    return load_config(path, overrides)
+    return load_config(path, overrides, flags)
 
 
 def with_data_dir(cfg, data_dir):
@@ -342,8 +399,6 @@ def with_data_dir(cfg, data_dir):
 
 def _recorded_data_dir(run_dir):
     """The scene folder a run was trained on, from `RUN_DIR/config.toml`."""
-    from velogauss.config import load_config
-
     cfg = load_config(_existing_file(Path(run_dir) / "config.toml", "run config"))
     if not cfg.data.dir:
         raise ValueError(f"{Path(run_dir) / 'config.toml'}: data.dir: empty; pass the scene folder with --data")
@@ -351,14 +406,35 @@ def _recorded_data_dir(run_dir):
 
 
 def load_run_model(run_dir, device=None):
-    """`(model, cfg)` of a trained run; FileNotFoundError naming the missing folder or checkpoint."""
+    """`(model, cfg)` of a trained run, without gradients; FileNotFoundError naming the missing
+    folder or checkpoint, ValueError naming `--device` when this machine lacks it."""
     run_dir = Path(run_dir)
+    if device is not None:
+        check_device(device)
     if not run_dir.is_dir():
         raise FileNotFoundError(2, "run folder not found", str(run_dir))
     _existing_file(run_dir / "checkpoints" / "latest.pt", "no checkpoint in the run folder (train it first)")
     from velogauss.train.checkpoint import load_model
 
     return load_model(run_dir, device or _default_device())
+
+
+def check_device(name, what="--device"):
+    """Raise ValueError naming `what`, `name` and the devices this machine has, unless torch
+    can use device `name` here (cpu, cuda[:i], mps)."""
+    import torch
+
+    cuda = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    mps = torch.backends.mps.is_available()
+    available = ["cpu"] + [f"cuda:{i}" for i in range(cuda)] + ["mps"] * mps
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError):
+        device = None
+    ok = device is not None and (device.type == "cpu" or (device.type == "cuda" and (device.index or 0) < cuda)
+                                 or (device.type == "mps" and mps))
+    if not ok:
+        raise ValueError(f"{what}: device {name!r} is not available on this machine; available: {', '.join(available)}")
 
 
 def _default_device():
@@ -368,11 +444,14 @@ def _default_device():
 
 
 def load_run_scene(cfg, data_dir):
-    """The run's scene, loaded with the run's observed window, resolution and background."""
-    from velogauss.data import load_scene
+    """The run's scene, loaded with the run's observed window, resolution and background; DataError
+    for bad data or images smaller than the SSIM window."""
+    from velogauss.data import check_trainable_size, load_scene
 
-    return load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
-                      background=cfg.data.background)
+    scene = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
+                       background=cfg.data.background)
+    check_trainable_size(scene)
+    return scene
 
 
 def run_evaluation(run_dir, model, scene, splits, lpips_weights):

@@ -1,137 +1,175 @@
 """The training configuration: defaults, a TOML file, and `section.key=value` overrides.
 
-`load_config(path, overrides)` starts from the defaults below, applies the TOML file at
-`path` (if any), then each override `section.key=value` (the value is read as a TOML value;
-a bare word is taken as a string), and validates the result. Unknown sections or keys and
-values of the wrong type raise ValueError naming the key (and the file). `to_toml(cfg)`
-writes a config back; `velogauss train` saves it as `RUN_DIR/config.toml`, which is what
-`eval`, `render`, `export` and `--resume` read again.
+`load_config(path, overrides, flags)` starts from the defaults below, applies the TOML file
+at `path` (if any), then each override `section.key=value` (the value is read as a TOML
+value; a bare word is taken as a string), then the command-line `flags` (typed values), and
+validates the result with pydantic: each field's type and range (`Field(ge=..., ...)`) is
+written next to it below, and is checked before any training. Unknown sections or keys and
+values of the wrong type or out of range raise ValueError naming the key and where the value
+came from (the file, `--set` or the flag). `to_toml(cfg)` writes a config back (tomli-w);
+`velogauss train` saves it as `RUN_DIR/config.toml`, which is what `eval`, `render`,
+`export` and `--resume` read again.
+
+The lists of choices are defined once, here, as `Literal` types (`Ablation`, `Integrator`,
+`Effect`); the command line shows them and validation enforces them.
 """
 
 import dataclasses
-import math
 import tomllib
-from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Literal, Union, get_args
 
-from velogauss_core.motion import ABLATIONS, INTEGRATORS, MotionConfig
+import tomli_w
+from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
+from pydantic.dataclasses import dataclass
+
+from velogauss_core.motion import ABLATIONS, EFFECTS, INTEGRATORS, Ablation, Effect, Integrator, MotionConfig
 
 
-@dataclass(frozen=True)
+def _int(**bounds):
+    """An integer (bools and floats refused) within `bounds` (pydantic's ge, le, ...)."""
+    return Annotated[int, Field(strict=True, **bounds)]
+
+
+def _float(**bounds):
+    """A finite number (ints accepted, strings refused) within `bounds`."""
+    return Annotated[float, Field(strict=True, allow_inf_nan=False, **bounds)]
+
+
+Flag = Annotated[bool, Field(strict=True)]
+Unit = _float(ge=0.0, le=1.0)
+# Learning rates decayed log-linearly (velogauss.train.optim) need a positive start and end;
+# the others may be 0, which freezes that group.
+Rate = _float(gt=0.0)
+Rate0 = _float(ge=0.0)
+Count = _int(ge=1)
+Every = _int(ge=0)  # an interval in iterations; 0 disables
+_STRICT = ConfigDict(extra="forbid")
+
+
+@dataclass(frozen=True, config=_STRICT)
 class DataConfig:
     """Which scene and how it is loaded (velogauss.data.load_scene)."""
 
     dir: str = ""  # the scene folder; recorded by `velogauss train`
-    max_time: float = 0.75  # end of the observed window; later frames are the future
-    half_res: bool = False
-    background: tuple = (1.0, 1.0, 1.0)
+    max_time: _float(gt=0.0, lt=1.0) = 0.75  # end of the observed window; later frames are the future
+    half_res: Flag = False
+    background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=_STRICT)
 class ModelConfig:
     """The representation and the motion model (spec/motion.md, spec/physics.md)."""
 
-    # Effects the motion may use (subset of velogauss.scenes.EFFECTS), or "auto": the
-    # scene's declared effects (scene.json), else every effect.
-    effects: object = "auto"
+    # Effects the motion may use, or "auto": the scene's declared effects (scene.json),
+    # else every effect.
+    effects: Union[Literal["auto"], Annotated[tuple[Effect, ...], Field(min_length=1)]] = "auto"
     # Divergence loss on/off, or "auto": scene.json's `incompressible`, else true.
-    incompressible: object = "auto"
-    ablation: str = "full"  # one of ABLATIONS (the paper's PDS / ADF / GPC switches)
-    sh_degree: int = 1
+    incompressible: Union[Literal["auto"], Flag] = "auto"
+    ablation: Ablation = "full"
+    sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
     # The motion networks' sizes (velogauss_ref.motion.config.MotionConfig, whose defaults
     # they take; K = 32 is the paper's ablation value).
-    n_patterns: int = MotionConfig.n_patterns
-    code_dim: int = MotionConfig.code_dim
-    hidden: int = MotionConfig.hidden
-    depth: int = MotionConfig.depth
-    n_freqs_x: int = MotionConfig.n_freqs_x
-    n_freqs_t: int = MotionConfig.n_freqs_t
-    n_freqs_adf_x: int = MotionConfig.n_freqs_adf_x
-    n_freqs_adf_t: int = MotionConfig.n_freqs_adf_t
-    integrator: str = "rk2"  # the paper integrates with RK2
-    step: float = 0.05  # largest integration step in normalised time (one frame of 21)
+    n_patterns: Count = MotionConfig.n_patterns
+    code_dim: Count = MotionConfig.code_dim
+    hidden: Count = MotionConfig.hidden
+    depth: Count = MotionConfig.depth
+    # Positional-encoding frequencies 2^0 ... 2^(n-1): beyond 2^16 float32 sin(2^k x) is noise.
+    n_freqs_x: _int(ge=0, le=16) = MotionConfig.n_freqs_x
+    n_freqs_t: _int(ge=0, le=16) = MotionConfig.n_freqs_t
+    n_freqs_adf_x: _int(ge=0, le=16) = MotionConfig.n_freqs_adf_x
+    n_freqs_adf_t: _int(ge=0, le=16) = MotionConfig.n_freqs_adf_t
+    integrator: Integrator = "rk2"  # the paper integrates with RK2
+    # Largest integration step in normalised time (one frame of 21); a step beyond the whole
+    # window [0, 1] would not be a step.
+    step: _float(gt=0.0, le=1.0) = 0.05
     # The ADF has only seen t <= max_time; beyond it, its correction is held at its value
     # at max_time instead of evaluating sinusoids of an unseen t (ablation deform-only,
     # a DefGS-style model, evaluates the network at every t, as DefGS does).
-    adf_clamp_time: bool = True
-    init_points: int = 5000  # random initial Gaussians when the scene has no points3d.ply
-    init_opacity: float = 0.1
+    adf_clamp_time: Flag = True
+    init_points: Count = 5000  # random initial Gaussians when the scene has no points3d.ply
+    init_opacity: _float(gt=0.0, lt=1.0) = 0.1  # a logit is taken
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=_STRICT)
 class TrainConfig:
     """Optimisation schedule (3DGS-style learning rates, see velogauss.train.optim)."""
 
-    iterations: int = 3000
-    seed: int = 0
-    device: str = "cpu"
-    warmup: int = 200  # iterations on the t = 0 frames only, motion frozen
-    curriculum: int = 1200  # iterations over which the sampled times open up to max_time
-    lr_means: float = 1.6e-4  # times the camera extent, decayed to lr_means_final
-    lr_means_final: float = 1.6e-6
-    lr_sh: float = 2.5e-3  # degree-0 coefficients; higher degrees get lr_sh / 20
-    lr_opacity: float = 0.05
-    lr_scales: float = 5e-3
-    lr_quats: float = 1e-3
-    lr_motion: float = 1e-3  # motion networks, decayed to lr_motion_final
-    lr_motion_final: float = 1e-4
-    lr_acc: float = 0.05  # the acceleration polynomial Q (see velogauss.train.optim)
+    iterations: Count = 3000
+    seed: _int(ge=0) = 0  # NumPy refuses negative seeds
+    device: str = "cpu"  # checked against this machine's devices by the command line
+    warmup: _int(ge=0) = 200  # iterations on the t = 0 frames only, motion frozen
+    curriculum: _int(ge=0) = 1200  # iterations over which the sampled times open up to max_time
+    lr_means: Rate = 1.6e-4  # times the camera extent, decayed to lr_means_final
+    lr_means_final: Rate = 1.6e-6
+    lr_sh: Rate0 = 2.5e-3  # degree-0 coefficients; higher degrees get lr_sh / 20
+    lr_opacity: Rate0 = 0.05
+    lr_scales: Rate0 = 5e-3
+    lr_quats: Rate0 = 1e-3
+    lr_motion: Rate = 1e-3  # motion networks, decayed to lr_motion_final
+    lr_motion_final: Rate = 1e-4
+    lr_acc: Rate = 0.05  # the acceleration polynomial Q (see velogauss.train.optim)
     # L2 on the ADF's displacement, so velocity carries the motion; at 0.1 the ADF took the
     # motion over on toss (extrapolation 16.6 dB against 20.5 dB at 1.0).
-    lambda_adf: float = 1.0
+    lambda_adf: _float(ge=0.0) = 1.0
     # Iteration at which the ADF starts learning; -1: once the curriculum has opened the
     # whole window (warmup + curriculum), or with the motion for deform-only.
-    adf_start: int = -1
-    eval_every: int = 500  # PSNR on the interpolation split -> log.jsonl
-    checkpoint_every: int = 500
+    adf_start: _int(ge=-1) = -1
+    eval_every: Every = 500  # PSNR on the interpolation split -> log.jsonl
+    checkpoint_every: Every = 500  # 0: only at the end (and on Ctrl-C)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=_STRICT)
 class PhysicsConfig:
     """Global physical constraints on collocation points (VG-LOSS-PHYS)."""
 
     # The residuals are O(|v|²/L) ~ 10 in normalised time, so their squares are ~100 times
     # the photometric loss at these weights: strong enough to bind the future, weak enough
     # not to drown the images' gradients while the velocity forms (measured on toss).
-    lambda_transport: float = 1e-3
-    lambda_div: float = 1e-3
-    ramp: int = 1200  # iterations over which both weights rise linearly from 0
-    n_points: int = 1024  # collocation points per iteration, one random time each
-    bounds_margin: float = 0.1  # the box grows by this fraction of its size on each side
+    # A negative weight would reward breaking the physics.
+    lambda_transport: _float(ge=0.0) = 1e-3
+    lambda_div: _float(ge=0.0) = 1e-3
+    ramp: _int(ge=0) = 1200  # iterations over which both weights rise linearly from 0
+    n_points: Count = 1024  # collocation points per iteration, one random time each
+    bounds_margin: _float(ge=0.0) = 0.1  # the box grows by this fraction of its size on each side
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=_STRICT)
 class DensifyConfig:
     """Adaptive density control (3DGS): clone, split, prune, opacity reset."""
 
-    start: int = 200
-    until: int = 2000
-    every: int = 100
+    start: _int(ge=0) = 200
+    until: _int(ge=0) = 2000
+    every: Count = 100
     # Mean |d loss / d mean2d| in NDC units. 3DGS uses 2e-4 on ~800 px images; on the
     # 64 px synthetic scenes that clones whole objects into ~20k Gaussians while the
     # motion is still misfit, so the default is stricter.
-    grad_threshold: float = 5e-4
-    percent_dense: float = 0.01  # clone below, split above this fraction of the extent
-    prune_opacity: float = 0.005
-    opacity_reset_every: int = 1000  # 0 disables
-    max_gaussians: int = 10000
-    static_every: int = 500  # re-detect particles that do not move (0 disables)
+    grad_threshold: _float(gt=0.0) = 5e-4
+    percent_dense: Unit = 0.01  # clone below, split above this fraction of the extent
+    prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # at 1 every Gaussian would be pruned
+    opacity_reset_every: Every = 1000
+    max_gaussians: Count = 10000
+    static_every: Every = 500  # re-detect particles that do not move
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=_STRICT)
 class Config:
-    data: DataConfig = field(default_factory=DataConfig)
-    model: ModelConfig = field(default_factory=ModelConfig)
-    train: TrainConfig = field(default_factory=TrainConfig)
-    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
-    densify: DensifyConfig = field(default_factory=DensifyConfig)
+    data: DataConfig = Field(default_factory=DataConfig)
+    model: ModelConfig = Field(default_factory=ModelConfig)
+    train: TrainConfig = Field(default_factory=TrainConfig)
+    physics: PhysicsConfig = Field(default_factory=PhysicsConfig)
+    densify: DensifyConfig = Field(default_factory=DensifyConfig)
 
 
-def load_config(path=None, overrides=()):
-    """Defaults, then the TOML file `path`, then `overrides` (["section.key=value", ...]).
+_ADAPTER = TypeAdapter(Config)
 
-    Raises ValueError naming the file and key for an unknown key, a value of the wrong
-    type or an invalid value.
+
+def load_config(path=None, overrides=(), flags=None):
+    """Defaults, then the TOML file `path`, then `overrides` (["section.key=value", ...]), then
+    `flags` ({"section.key": (flag name, value)} from the command line, None values skipped).
+
+    Raises ValueError naming where the value came from (the file, `--set` or the flag) and the
+    key for an unknown key, a value of the wrong type or out of its range.
     """
     tree = config_to_dict(Config())
     if path is not None:
@@ -139,75 +177,70 @@ def load_config(path=None, overrides=()):
             document = tomllib.loads(Path(path).read_text())
         except tomllib.TOMLDecodeError as err:
             raise ValueError(f"{path}: not valid TOML ({err})") from None
-        _merge(tree, document, str(path))
-        # Validated stage by stage, so an error names where the bad value came from.
-        config_from_dict(tree, str(path))
+        tree = _merged(tree, document)
+        config_from_dict(tree, str(path))  # validated stage by stage: an error names its source
     for item in overrides:
         key, sep, text = item.partition("=")
         if not sep or "." not in key:
             raise ValueError(f"--set: expected SECTION.KEY=VALUE, got {item!r}")
         section, _, name = key.strip().partition(".")
-        _merge(tree, {section: {name: _parse_value(text.strip())}}, "--set")
+        tree = _merged(tree, {section: {name: _parse_value(text.strip())}})
         config_from_dict(tree, "--set")
+    for key, (flag, value) in (flags or {}).items():
+        section, _, name = key.partition(".")
+        tree = _merged(tree, {section: {name: value}})
+        config_from_dict(tree, flag)
     return config_from_dict(tree)
 
 
 def config_to_dict(cfg):
-    """The config as nested plain dicts (tuples become lists)."""
-    return {f.name: {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(getattr(cfg, f.name)).items()}
-            for f in dataclasses.fields(cfg)}
+    """The config as nested plain dicts (tuples become lists), as TOML and checkpoints hold it."""
+    return _ADAPTER.dump_python(cfg, mode="json")
 
 
 def config_from_dict(tree, source="config"):
     """Build and validate a `Config` from nested dicts; ValueError names `source` and the key."""
-    sections = {}
-    for f in dataclasses.fields(Config):
-        cls = f.default_factory
-        values = dict(tree.get(f.name, {}))
-        defaults = cls()
-        for key, value in values.items():
-            if not hasattr(defaults, key):
-                raise ValueError(f"{source}: {f.name}.{key}: unknown key")
-            values[key] = _coerce(f"{source}: {f.name}.{key}", value, getattr(defaults, key))
-        sections[f.name] = cls(**values)
-    cfg = Config(**sections)
-    _validate(cfg, source)
-    return cfg
+    try:
+        return _ADAPTER.validate_python(tree)
+    except ValidationError as err:
+        raise ValueError(_describe(err, tree, source)) from None
 
 
 def to_toml(cfg):
     """The config as TOML text (one table per section)."""
-    lines = []
-    for section, values in config_to_dict(cfg).items():
-        lines.append(f"[{section}]")
-        lines += [f"{key} = {toml_value(value)}" for key, value in values.items()]
-        lines.append("")
-    return "\n".join(lines)
+    return tomli_w.dumps(config_to_dict(cfg))
 
 
-def toml_value(value):
-    """A Python bool, int, float, str or list of them as a TOML value."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ValueError(f"value: TOML cannot hold {value!r} here")
-    return repr(value)
+# What `--resume` may change: how long to train (the learning-rate decay then stretches to the
+# new end), on which device, how often to log and checkpoint, and where the scene folder now
+# lies. Every other key shapes the model, its losses or its schedule, so a change would
+# make the checkpoint disagree with config.toml (or fail to load into the model).
+RESUME_SAFE_KEYS = ("train.iterations", "train.device", "train.eval_every", "train.checkpoint_every", "data.dir")
 
 
-def _merge(tree, document, source):
-    for section, values in document.items():
-        if section not in tree:
-            raise ValueError(f"{source}: [{section}]: unknown section; expected one of {', '.join(tree)}")
-        if not isinstance(values, dict):
-            raise ValueError(f"{source}: {section}: expected a table of keys")
+def check_resume_config(saved, cfg):
+    """Raise ValueError naming the first key, its old and new value, where `cfg` differs from
+    the config `saved` in a run's checkpoint other than in RESUME_SAFE_KEYS."""
+    old, new = config_to_dict(saved), config_to_dict(cfg)
+    for section, values in old.items():
         for key, value in values.items():
-            if key not in tree[section]:
-                raise ValueError(f"{source}: {section}.{key}: unknown key; expected one of {', '.join(tree[section])}")
-            tree[section][key] = value
+            name = f"{section}.{key}"
+            if name not in RESUME_SAFE_KEYS and new[section][key] != value:
+                raise ValueError(f"--resume: {name}: the run was trained with {value!r}, got {new[section][key]!r}; "
+                                 f"only {', '.join(RESUME_SAFE_KEYS)} may change on resume (start a new run with "
+                                 "another --out to change it)")
+
+
+def _merged(tree, document):
+    """`tree` with `document`'s sections merged in key by key (a section that is not a table
+    replaces the defaults, so that validation reports it)."""
+    out = {section: dict(values) for section, values in tree.items()}
+    for section, values in document.items():
+        if isinstance(values, dict) and section in out:
+            out[section].update(values)
+        else:
+            out[section] = values
+    return out
 
 
 def _parse_value(text):
@@ -217,63 +250,18 @@ def _parse_value(text):
         return text
 
 
-def _coerce(name, value, default):
-    """`value` in the type of `default` (ints count as floats; lists become tuples)."""
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"{name}: expected true or false, got {value!r}")
-        return value
-    if isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{name}: expected an integer, got {value!r}")
-        return value
-    if isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ValueError(f"{name}: expected a finite number, got {value!r}")
-        return float(value)
-    if isinstance(default, tuple):
-        if not isinstance(value, (list, tuple)):
-            raise ValueError(f"{name}: expected a list, got {value!r}")
-        return tuple(value)
-    if isinstance(value, list):
-        return tuple(value)
-    return value
-
-
-def _validate(cfg, source):
-    m, t, d, p, data = cfg.model, cfg.train, cfg.densify, cfg.physics, cfg.data
-    checks = [
-        ("data.max_time", 0.0 < data.max_time < 1.0, "a value in (0, 1)"),
-        ("data.background", len(data.background) == 3 and all(isinstance(v, (int, float)) and 0 <= v <= 1
-                                                               for v in data.background), "three values in [0, 1]"),
-        ("model.ablation", m.ablation in ABLATIONS, f"one of {', '.join(ABLATIONS)}"),
-        ("model.integrator", m.integrator in INTEGRATORS, f"one of {', '.join(INTEGRATORS)}"),
-        ("model.step", m.step > 0, "a positive step"),
-        ("model.sh_degree", 0 <= m.sh_degree <= 3, "0, 1, 2 or 3"),
-        ("model.effects", m.effects == "auto" or (isinstance(m.effects, tuple) and m.effects), '"auto" or a list'),
-        ("model.incompressible", m.incompressible == "auto" or isinstance(m.incompressible, bool), '"auto", true or false'),
-        ("model.init_opacity", 0 < m.init_opacity < 1, "a value in (0, 1)"),
-        ("train.iterations", t.iterations >= 1, "at least 1"),
-        ("train.eval_every", t.eval_every >= 0, ">= 0 (0 disables)"),
-        ("train.checkpoint_every", t.checkpoint_every >= 0, ">= 0 (0: only at the end)"),
-        ("train.adf_start", t.adf_start >= -1, ">= 0, or -1 for the default"),
-        ("physics.n_points", p.n_points >= 1, "at least 1"),
-        ("densify.every", d.every >= 1, "at least 1"),
-        ("densify.max_gaussians", d.max_gaussians >= 1, "at least 1"),
-    ]
-    for key, ok, expected in checks:
-        if not ok:
-            section, _, name = key.partition(".")
-            raise ValueError(f"{source}: {key}: expected {expected}, got {getattr(getattr(cfg, section), name)!r}")
-    if m.effects != "auto":
-        from velogauss.scenes import EFFECTS
-
-        unknown = [e for e in m.effects if e not in EFFECTS]
-        if unknown:
-            raise ValueError(f"{source}: model.effects: unknown effect(s) {unknown}; choose from {', '.join(EFFECTS)}")
-    for name in ("n_patterns", "code_dim", "hidden", "depth", "init_points"):
-        if getattr(m, name) < 1:
-            raise ValueError(f"{source}: model.{name}: expected at least 1, got {getattr(m, name)!r}")
-    for name in ("warmup", "curriculum"):
-        if getattr(t, name) < 0:
-            raise ValueError(f"{source}: train.{name}: expected >= 0, got {getattr(t, name)!r}")
+def _describe(err, tree, source):
+    """One line for the first key pydantic rejects: `source: section.key: what, got value`."""
+    first = err.errors()[0]
+    loc = first["loc"]
+    sections = [f.name for f in dataclasses.fields(Config)]
+    if len(loc) == 1:
+        if loc[0] not in sections:
+            return f"{source}: [{loc[0]}]: unknown section; expected one of {', '.join(sections)}"
+        return f"{source}: {loc[0]}: expected a table of keys, got {tree[loc[0]]!r}"
+    section, key = loc[0], loc[1]
+    if first["type"] == "unexpected_keyword_argument":
+        known = [f.name for f in dataclasses.fields(getattr(Config(), section))]
+        return f"{source}: {section}.{key}: unknown key; expected one of {', '.join(known)}"
+    reasons = dict.fromkeys(e["msg"] for e in err.errors() if e["loc"][:2] == (section, key))
+    return f"{source}: {section}.{key}: {' or '.join(reasons)}, got {tree[section][key]!r}"

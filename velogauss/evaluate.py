@@ -220,6 +220,7 @@ def trajectory_error(model, scene, max_time, times=MOTION_EVAL_TIMES):
     return {"gaussians": int(keep.sum()), "per_time": rows, **means}
 
 
+@torch.no_grad()  # inference only: no autograd graph of the motion is kept
 def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth=None, progress=False):
     """Every metric of the module docstring for `model` on `scene` (a `SceneData`).
 

@@ -24,7 +24,7 @@ from velogauss.io_utils import to_numpy, write_bytes
 from velogauss_fast.quaternion import normalize_quat
 from velogauss_fast.sh import C0
 from velogauss_core.checks import check_array
-from velogauss_core.constants import EXPORT_OPACITY_CLAMP
+from velogauss_core.constants import EXPORT_OPACITY_CLAMP, TIME_HORIZON
 
 
 def ply_property_names(sh_degree):
@@ -95,11 +95,13 @@ def ply_bytes(table, sh_degree):
 def export_ply(model, t, path):
     """Write `model.gaussians_at(t)` to `path` as a 3DGS PLY (atomically); return the Gaussian count.
 
-    `t`: a finite time (normalised, any real value: t > max_time is the extrapolated future).
-    Raises ValueError naming `t` for a non-finite or non-numeric time.
+    `t`: a finite time (normalised, |t| <= TIME_HORIZON: t > max_time is the extrapolated
+    future), evaluated without gradients. Raises ValueError naming `t` for a non-finite,
+    non-numeric or too distant time.
     """
     t = check_time(t)
-    g = model.gaussians_at(t)
+    with torch.no_grad():  # inference: no graph of the integration steps is kept
+        g = model.gaussians_at(t)
     table = gaussians_to_table(
         to_numpy(g["means"]), to_numpy(g["quats"]), to_numpy(g["scales"]), to_numpy(g["opacities"]).reshape(-1),
         to_numpy(g["colors"]), int(g["sh_degree"]),
@@ -108,14 +110,18 @@ def export_ply(model, t, path):
     return table.shape[0]
 
 
-def check_time(t):
-    """Return `t` as a float, or raise ValueError naming `t` when it is not a finite real number."""
+def check_time(t, name="t"):
+    """Return `t` as a float; ValueError naming `name` when it is not a finite real number or
+    lies beyond the horizon |t| <= TIME_HORIZON (velogauss_ref.constants, where the why is)."""
     try:
         value = float(t)
     except (TypeError, ValueError):
-        raise ValueError(f"t: expected a finite real number, got {t!r}") from None
+        raise ValueError(f"{name}: expected a finite real number, got {t!r}") from None
     if not np.isfinite(value):
-        raise ValueError(f"t: expected a finite real number, got {t!r}")
+        raise ValueError(f"{name}: expected a finite real number, got {t!r}")
+    if abs(value) > TIME_HORIZON:
+        raise ValueError(f"{name}: {t} is beyond the horizon |t| <= {TIME_HORIZON:g} (TIME_HORIZON: the model has "
+                         "seen t in [0, max_time], and integration time grows with |t|)")
     return value
 
 

@@ -8,6 +8,7 @@ destroys the previous one: readers see either the old file or the new one.
 """
 
 import contextlib
+import errno
 import json
 import os
 import tempfile
@@ -40,9 +41,32 @@ def atomic_path(path):
         yield tmp
         _fsync(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         tmp.unlink(missing_ok=True)
+        if isinstance(err, OSError):
+            # Named after the destination (not the temporary), so the user knows where it failed.
+            reason = "no space left on device" if err.errno == errno.ENOSPC else (err.strerror or str(err))
+            raise OSError(err.errno, f"{reason} while writing", str(path)) from None
         raise
+
+
+def check_writable(folder, *names):
+    """Raise OSError naming `folder` unless files can be created in it (or, where it does not
+    exist yet, in its nearest existing parent, which must be a folder), or naming the file
+    `folder / name` for each of `names` that is a folder. Creates nothing that stays: called
+    before work starts, so a read-only or misplaced output fails at once."""
+    folder = Path(folder)
+    for name in names:
+        if (folder / name).is_dir():
+            raise IsADirectoryError(errno.EISDIR, "cannot write the file: a folder is in the way", str(folder / name))
+    existing = next(p for p in (folder, *folder.parents) if p.exists() or p == Path(p.anchor or "."))
+    if not existing.is_dir():
+        raise OSError(errno.ENOTDIR, "cannot create the output folder: a file is in the way", str(existing))
+    try:
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as err:
+        raise OSError(err.errno, f"output folder is not writable ({err.strerror})", str(folder)) from None
 
 
 def write_bytes(path, data):

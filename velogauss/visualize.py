@@ -29,6 +29,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
+import torch  # noqa: E402
 from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 from tqdm.auto import tqdm  # noqa: E402
 
@@ -153,14 +154,15 @@ def velocity_field_figure(model, bounds, times=(0.0, 1.0), ground_truth=None):
         means = query(model.tracked_positions, t)
         near = np.abs(means[:, normal] - centre[normal]) < thickness
         ax.scatter(means[near, a], means[near, b], s=2, color="0.75", label="Gaussians near the slice")
-        q = ax.quiver(points[:, a], points[:, b], v[:, a], v[:, b], speed, cmap="viridis", angles="xy")
+        q = ax.quiver(points[:, a], points[:, b], v[:, a], v[:, b], speed, cmap="viridis", angles="xy",
+                      scale=_quiver_scale(v))
         fig.colorbar(q, ax=ax, label="learned speed |v|")
         if ground_truth is not None:
             inside = ground_truth.body_index(points, t) >= 0
             if np.any(inside):
                 v_gt = ground_truth.velocity(points[inside], t)
                 ax.quiver(points[inside, a], points[inside, b], v_gt[:, a], v_gt[:, b], color="tab:orange",
-                          angles="xy", width=0.003, label="ground truth (inside bodies)")
+                          angles="xy", width=0.003, scale=_quiver_scale(v_gt), label="ground truth (inside bodies)")
         ax.set_title(f"learned velocity field, t = {t:g}, slice {_AXES[normal]} = {centre[normal]:.2f}")
         ax.set_xlabel(_AXES[a])
         ax.set_ylabel(_AXES[b])
@@ -168,6 +170,12 @@ def velocity_field_figure(model, bounds, times=(0.0, 1.0), ground_truth=None):
         ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def _quiver_scale(v):
+    """matplotlib's autoscale (None), except for an all-zero field, where autoscaling divides
+    by its zero mean length: any fixed scale draws the zero-length arrows (as dots)."""
+    return None if np.any(v) else 1.0
 
 
 def trajectories_figure(model, bounds, max_time, ground_truth=None):
@@ -200,6 +208,7 @@ def trajectories_figure(model, bounds, max_time, ground_truth=None):
     return fig
 
 
+@torch.no_grad()  # inference only: no autograd graph of the motion is kept
 def render_run(model, scene, out_dir, fps=8, ground_truth=None, label=True, progress=False):
     """Write every picture listed in the module docstring into `out_dir`; return their paths.
 

@@ -99,3 +99,17 @@ EXPORT_OPACITY_CLAMP = 1e-7
 # bodies are closer than this (multi's cube rests on the ground), a Gaussian goes to the
 # nearer one (AnalyticScene.body_index), so membership stays well defined.
 EVAL_SURFACE_MARGIN = 0.05
+
+# --- Inference at arbitrary times (velogauss export/render/view) ---------------------------
+# |t| beyond this is refused. The model has only seen t in [0, max_time] (normalised, so
+# the whole recording is [0, 1]); t = 100 is already a hundred recordings into the future,
+# where the learned acceleration polynomial (degree ACC_POLY_DEGREE) dominates everything
+# else. Integration cost grows linearly with |t| (|t| / model.step steps: 2000 RK2 steps at
+# the default step 0.05 and t = 100, about a minute on a CPU for 10k Gaussians), so without a
+# bound a mistyped time (1e6) runs for days.
+TIME_HORIZON = 100.0
+# Integration evaluates the time network for this many stage times at once (VG-TRAJ): at the
+# default step every t in [0, 1] fits in one chunk (at most 80 RK4 stages), so training is
+# unchanged, while a far time holds at most this many stages' coefficients in memory
+# (256 x 12 x N floats: 120 MB for 10k Gaussians) instead of all of them.
+STAGE_CHUNK = 256

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from velogauss.cli import app, default_run_dir, parse_background, train_overrides
+from velogauss.cli import app, default_run_dir, parse_background, train_flags
 from velogauss.scenes import SCENES
 
 runner = CliRunner()
@@ -73,7 +73,7 @@ def test_render_run_dir_without_checkpoint(tmp_path):
 
 @pytest.mark.parametrize("time", ["nan", "inf", "soon"])
 def test_export_bad_time(tmp_path, time):
-    assert_bad_input(invoke("export", tmp_path, "--time", time), "t:", time)
+    assert_bad_input(invoke("export", tmp_path, "--time", time), "--time:", time)
 
 
 def test_eval_bad_split(tmp_path):
@@ -102,12 +102,18 @@ def test_bench_unknown_benchmark():
     assert_bad_input(invoke("bench", "disk"), "disk")
 
 
-def test_flags_become_config_overrides():
-    overrides = train_overrides(effects="translation, rotation", max_time=0.5, half_res=True, background="black")
-    assert "data.max_time=0.5" in overrides
-    assert "data.half_res=true" in overrides
-    assert "data.background=[0.0, 0.0, 0.0]" in overrides
-    assert 'model.effects=["translation", "rotation"]' in overrides
+def test_flags_become_typed_config_values():
+    flags = train_flags(effects="translation, rotation", max_time=0.5, half_res=True, background="black")
+    assert flags == {"model.effects": ("--effects", ["translation", "rotation"]), "data.max_time": ("--max-time", 0.5),
+                     "data.half_res": ("--half-res", True), "data.background": ("--background", (0.0, 0.0, 0.0))}
+
+
+def test_bad_flag_values_name_the_flag(tmp_path):
+    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--effects", "translation,magic"), "--effects",
+                     "model.effects", "magic")
+    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--iterations", 0), "--iterations",
+                     "train.iterations")
+    assert not (tmp_path / "run").exists()
 
 
 def test_background_parsing():

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from velogauss import io_utils
 from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.model import build_model, scene_profile
@@ -157,12 +158,15 @@ def test_checkpoint_write_is_atomic(tiny_scene, tmp_path, monkeypatch):
     loop.train(cfg, tiny_scene, tmp_path, progress=False)
     before = checkpoint_path(tmp_path).read_bytes()
 
-    def broken_save(obj, path):
-        with open(path, "wb") as handle:
-            handle.write(b"half a checkpo")
-        raise OSError("disk full")
+    fsync = io_utils._fsync
 
-    monkeypatch.setattr(torch, "save", broken_save)
+    def broken_fsync(path):  # the checkpoint's temporary file is half written when the disk fills
+        if path.name.startswith(".latest.pt."):
+            path.write_bytes(b"half a checkpo")
+            raise OSError("disk full")
+        fsync(path)
+
+    monkeypatch.setattr(io_utils, "_fsync", broken_fsync)
     with pytest.raises(OSError, match="disk full"):
         loop.train(load_config(None, TINY + ["train.iterations=8"]), tiny_scene, tmp_path, resume=True,
                    progress=False)

@@ -38,6 +38,7 @@ from skimage.transform import downscale_local_mean
 from velogauss.data.cameras import Camera, check_rigid, intrinsics_from_focal, intrinsics_from_fov
 from velogauss.data.errors import DataError
 from velogauss.data.ply import read_ply
+from velogauss_core.constants import SSIM_WINDOW
 
 _SPLIT_FILES = {"train": "transforms_train.json", "val": "transforms_val.json", "test": "transforms_test.json"}
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -173,6 +174,18 @@ def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
         metadata=metadata,
         root=root,
     )
+
+
+def check_trainable_size(scene):
+    """Raise DataError naming an image of `scene` (a `SceneData`) when its images (as loaded,
+    after any halving) are smaller than the SSIM window (SSIM_WINDOW pixels a side): the
+    training loss and the evaluation's SSIM need one whole window. `load_scene` itself reads
+    any size; training and evaluation call this before they start."""
+    first = scene.train[0]
+    height, width = first.image.shape[:2]
+    if min(height, width) < SSIM_WINDOW:
+        raise DataError(first.path, "file_path", f"image is {width}x{height} pixels as loaded, smaller than the "
+                        f"{SSIM_WINDOW}x{SSIM_WINDOW} SSIM window (SSIM_WINDOW) of the loss and metrics")
 
 
 def camera_focus_bounds(cameras):
@@ -321,7 +334,9 @@ def _load_image(record, background):
         raw = iio.imread(path, plugin="pillow")
     except Exception as err:  # imageio raises many plugin-specific types for corrupt files
         raise DataError(path, "file_path", f"unreadable image ({type(err).__name__}: {err})") from None
-    if raw.dtype.kind == "u":
+    if raw.dtype.kind == "b":  # 1-bit PNG: pillow reads it as bool
+        image = raw.astype(np.float32)
+    elif raw.dtype.kind == "u":
         image = raw.astype(np.float32) / np.float32(np.iinfo(raw.dtype).max)
     elif raw.dtype.kind == "f":
         image = raw.astype(np.float32)

@@ -4,19 +4,26 @@
 a crash or Ctrl-C during the write leaves the previous checkpoint intact. It holds the
 config, the resolved effect profile, the model's state (its shapes follow from it), the
 optimiser, the density statistics, the NumPy and torch RNG states, the iteration count
-and the training time so far.
+and the training state of `extra` (training time so far, the PSNR moving average).
+
+The file is one header line `velogauss-checkpoint/2 sha256=<hex>` followed by the bytes of
+the `torch.save`d dict above, whose SHA-256 the header holds and every load checks: flipped
+bytes are reported as a corrupt checkpoint naming the file, never read as other weights.
 """
 
 import dataclasses
+import hashlib
+import io
 from pathlib import Path
 
 import torch
 
 from velogauss.config import config_from_dict, config_to_dict
-from velogauss.io_utils import atomic_path
+from velogauss.io_utils import write_bytes
 from velogauss.model.build import model_from_state, profile_from_dict
 
-FORMAT = "velogauss-checkpoint/1"
+FORMAT = "velogauss-checkpoint/2"
+_KEYS = ("iteration", "config", "profile", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
 
 
 def checkpoint_path(run_dir):
@@ -26,7 +33,6 @@ def checkpoint_path(run_dir):
 def save_checkpoint(run_dir, cfg, profile, model, optimizer, stats, rng, iteration, extra):
     """Write `latest.pt` atomically. extra: JSON-like training state (elapsed time, flags)."""
     payload = {
-        "format": FORMAT,
         "iteration": int(iteration),
         "config": config_to_dict(cfg),
         "profile": dataclasses.asdict(profile),
@@ -37,28 +43,58 @@ def save_checkpoint(run_dir, cfg, profile, model, optimizer, stats, rng, iterati
         "torch_rng": torch.get_rng_state(),
         "extra": extra,
     }
-    with atomic_path(checkpoint_path(run_dir)) as tmp:
-        torch.save(payload, tmp)
+    # Serialised in memory first: a full disk then fails in a plain file write (an OSError
+    # naming the path), not inside torch's zip writer.
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    data = buffer.getvalue()
+    write_bytes(checkpoint_path(run_dir), f"{FORMAT} sha256={_digest(data)}\n".encode("ascii") + data)
 
 
 def load_checkpoint(run_dir, device="cpu"):
-    """The payload of `latest.pt`; ValueError naming the file when it is not a velogauss checkpoint."""
+    """The payload of `latest.pt`; ValueError naming the file when it is not a velogauss
+    checkpoint, fails its checksum, lacks a key or holds non-finite model values."""
     path = checkpoint_path(run_dir)
     if not path.is_file():
         raise FileNotFoundError(2, "no checkpoint in the run folder (train it first)", str(path))
-    try:
-        payload = torch.load(path, map_location=device, weights_only=False)
-    except Exception as err:  # torch raises many types for a corrupt file; all mean "unreadable"
-        raise ValueError(f"{path}: unreadable checkpoint ({type(err).__name__}: {err})") from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+    header, _, data = path.read_bytes().partition(b"\n")
+    fmt, _, digest = header.decode("ascii", errors="replace").partition(" sha256=")
+    if fmt != FORMAT:
         raise ValueError(f"{path}: format: not a {FORMAT} file")
+    if _digest(data) != digest:
+        raise ValueError(f"{path}: corrupt checkpoint (its content does not match its sha256 checksum)")
+    try:
+        payload = torch.load(io.BytesIO(data), map_location=device, weights_only=False)
+    except Exception as err:  # torch raises many types for a bad payload; all mean "unreadable"
+        raise ValueError(f"{path}: unreadable checkpoint ({type(err).__name__}: {err})") from None
+    if not isinstance(payload, dict):
+        raise ValueError(f"{path}: format: not a {FORMAT} file")
+    missing = [key for key in _KEYS if key not in payload]
+    if missing:
+        raise ValueError(f"{path}: {missing[0]}: missing from the checkpoint")
+    for name, value in payload["model"].items():
+        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            raise ValueError(f"{path}: model.{name}: non-finite values (NaN or inf) in the checkpoint")
     return payload
 
 
 def load_model(run_dir, device="cpu"):
-    """(model in eval mode on `device`, its Config) from `RUN_DIR/checkpoints/latest.pt`."""
+    """(model in eval mode on `device`, without gradients, its Config) from
+    `RUN_DIR/checkpoints/latest.pt`: every caller (eval, render, export, view) is inference."""
     payload = load_checkpoint(run_dir, device)
     cfg = config_from_dict(payload["config"], source=str(checkpoint_path(run_dir)))
     model = model_from_state(cfg, profile_from_dict(payload["profile"]), payload["model"])
     model.load_state_dict(payload["model"])
-    return model.to(device).eval(), cfg
+    return model.to(device).eval().requires_grad_(False), cfg
+
+
+def remove_stale_temporaries(run_dir):
+    """Delete `.latest.pt.*.tmp.pt` files that a killed checkpoint write left behind."""
+    folder = checkpoint_path(run_dir).parent
+    if folder.is_dir():
+        for tmp in folder.glob(".latest.pt.*.tmp.pt"):
+            tmp.unlink(missing_ok=True)
+
+
+def _digest(data):
+    return hashlib.sha256(data).hexdigest()

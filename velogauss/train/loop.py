@@ -23,13 +23,14 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from velogauss.config import to_toml
+from velogauss.config import check_resume_config, config_from_dict, to_toml
+from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
 from velogauss.model.build import profile_from_dict
 from velogauss.model.dynamic import render_gaussians
 from velogauss.model.motion import motion_residuals
-from velogauss.train.checkpoint import load_checkpoint, save_checkpoint
+from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train.sampling import FrameSampler, camera_extent, collocation_points
@@ -52,11 +53,14 @@ def train(cfg, data, run_dir, resume=False, progress=True):
     log.jsonl); resume: continue from `run_dir`'s latest checkpoint (the config must match
     the one it was trained with, except `train.iterations`, which may grow).
     """
+    check_trainable_size(data)
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
     extent = camera_extent([f.camera for f in data.train])
+    remove_stale_temporaries(run_dir)
     if resume:
         payload = load_checkpoint(run_dir, device)
+        check_resume_config(config_from_dict(payload["config"], str(checkpoint_path(run_dir))), cfg)
         profile = profile_from_dict(payload["profile"])
         model = model_from_state(cfg, profile, payload["model"])
         model.load_state_dict(payload["model"])
@@ -66,13 +70,15 @@ def train(cfg, data, run_dir, resume=False, progress=True):
         torch.set_rng_state(payload["torch_rng"])
         start, extra = payload["iteration"], payload["extra"]
         _truncate_log(run_dir / "log.jsonl", start)
+        # The checkpoint and config.toml stay one truth: the changes check_resume_config allows.
+        write_text(run_dir / "config.toml", to_toml(cfg))
     else:
         rng = np.random.default_rng(cfg.train.seed)
         torch.manual_seed(cfg.train.seed)
         profile = scene_profile(cfg, data.metadata)
         points, colors = _initial_points(data, cfg.model.init_points, rng)
         model = build_model(cfg, profile, points, colors, rng).to(device)
-        start, extra = 0, {"elapsed_s": 0.0, "after_reset": False}
+        start, extra = 0, {"elapsed_s": 0.0, "after_reset": False, "psnr_ema": None}
         run_dir.mkdir(parents=True, exist_ok=True)
         write_text(run_dir / "config.toml", to_toml(cfg))
         write_text(run_dir / "log.jsonl", "")
@@ -111,7 +117,9 @@ class _Loop:
         cfg = self.cfg.train
         bar = tqdm(range(start, cfg.iterations), initial=start, total=cfg.iterations, disable=not progress,
                    desc="train", dynamic_ncols=True)
-        psnr_ema, loss_value = None, float("nan")
+        # The moving average goes into checkpoints (extra), so a resumed run logs what an
+        # uninterrupted one does.
+        psnr_ema, loss_value = self.extra.get("psnr_ema"), float("nan")
         # Training time of earlier sessions of this run (resume) plus this session's.
         elapsed_before, clock = self.extra["elapsed_s"], time.perf_counter()
         with _deferred_interrupt() as interrupted:
@@ -127,6 +135,7 @@ class _Loop:
                     self.log_eval(done, loss_value, psnr_ema, elapsed)
                 last = done == cfg.iterations
                 if interrupted() or last or (cfg.checkpoint_every and done % cfg.checkpoint_every == 0):
+                    self.extra["psnr_ema"] = psnr_ema
                     self.checkpoint(done, elapsed)
                 if interrupted():
                     bar.close()
@@ -240,10 +249,24 @@ def _spread(frames, n):
 
 
 def _truncate_log(path, iteration):
-    """Drop log records after `iteration` (written by a run that then stopped uncheckpointed)."""
+    """Drop log records after `iteration` (written by a run that then stopped uncheckpointed).
+
+    A torn last line (a crash in the middle of an append) is dropped too; an unreadable line
+    before it raises ValueError naming the file and line.
+    """
     if not path.is_file():
         return
-    kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["iteration"] <= iteration]
+    lines = path.read_text().splitlines()
+    kept = []
+    for number, line in enumerate(lines, 1):
+        try:
+            record = json.loads(line) if line else None
+        except json.JSONDecodeError:
+            if number == len(lines):
+                break
+            raise ValueError(f"{path}: line {number}: not a JSON record") from None
+        if record is not None and record["iteration"] <= iteration:
+            kept.append(line)
     write_text(path, "".join(line + "\n" for line in kept))
 
 

@@ -11,6 +11,7 @@ from velogauss_fast.motion.integrate import integrate_schedule, schedule
 from velogauss_fast.motion.rates import axis_products, rate_plan, rotmat, state_rates
 from velogauss_fast.motion.scalars import check_time, times_tensor
 from velogauss_fast.quaternion import normalize_quat
+from velogauss_core.constants import STAGE_CHUNK
 
 
 def base_state(params, x0, q0, s0, z, t, h, method, cfg):
@@ -23,9 +24,9 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
     Only what cfg.mask moves is integrated (`velogauss_fast.motion.rates`): without a
     rotation column q_t is q0 normalised, without a stretch or shear column s_t is s0 itself
     (both exactly what integrating their zero rates gives), and R(q0) is built once when log s
-    moves but q does not. m(z) is computed once, the time network runs once on all stage
-    times, and the active coefficients of every stage come from one (stages x active, K) @
-    (K, N) product. t = 0 returns the canonical state (q normalised). A quaternion that stays
+    moves but q does not. m(z) is computed once, the time network runs once per STAGE_CHUNK
+    stage times, and the active coefficients of those stages come from one (stages x active,
+    K) @ (K, N) product. t = 0 returns the canonical state (q normalised). A quaternion that stays
     below QUAT_ZERO_NORM_SQ comes back as the identity (1, 0, 0, 0). Raises ValueError for
     bad shapes, non-finite or non-positive s0, a bad t, h or method.
     """
@@ -43,7 +44,7 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
     lay = plan.layout
     if not lay.columns:
         return x0, normalize_quat(q0), s0  # w = 0: nothing moves, exactly as integrating 0
-    stage_w = iter(_stage_coefficients(params, z, taus, lay.columns, cfg))
+    stage_w = _stage_coefficients(params, z, taus, lay.columns, cfg)
     # R(q0) is constant when q is: its axis products are built once, not once per stage.
     RR0 = axis_products(rotmat(q0.T)) if lay.strain and not lay.rotation else None
 
@@ -59,14 +60,17 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
 
 
 def _stage_coefficients(params, z, taus, columns, cfg):
-    """The active coefficients w(tau, z)[:, columns] at every stage time tau, as S tensors
-    (a, N) (component-major, see `velogauss_fast.motion.rates`).
+    """The active coefficients w(tau, z)[:, columns] at every stage time tau, yielded in order
+    as S tensors (a, N) (component-major, see `velogauss_fast.motion.rates`).
 
     Equal to `coefficients(...)` restricted to the mask's columns (the others are exactly 0):
-    P at all S times from one run of the time network, then one matrix product with m(z).
+    P at up to STAGE_CHUNK times from one run of the time network, then one matrix product
+    with m(z), so integrating to a far time holds one chunk, not all S stages.
     """
     m = mixing_weights(params, z)  # [N, K], constant along the path: the code is frozen
-    P = motion_patterns_at(params, times_tensor(taus, params["time"][0][0]), cfg)  # [S, K, 12]
     index = torch.tensor(columns, dtype=torch.long, device=m.device)
-    P = P.index_select(2, index).transpose(1, 2).reshape(len(taus) * len(columns), m.shape[1])  # [S a, K]
-    return (P @ m.T).split(len(columns))
+    for start in range(0, len(taus), STAGE_CHUNK):
+        chunk = taus[start:start + STAGE_CHUNK]
+        P = motion_patterns_at(params, times_tensor(chunk, params["time"][0][0]), cfg)  # [S', K, 12]
+        P = P.index_select(2, index).transpose(1, 2).reshape(len(chunk) * len(columns), m.shape[1])  # [S' a, K]
+        yield from (P @ m.T).split(len(columns))
