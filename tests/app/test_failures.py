@@ -90,13 +90,12 @@ def test_export_refuses_a_time_past_the_horizon_or_not_finite(run, time):
     assert snapshot(run) == before and not (run / "export").exists()
 
 
-@pytest.mark.parametrize("command", [("export", "--time", "3"), ("render", "--no-labels"), ("eval",)])
-def test_inference_keeps_no_autograd_graph(run, command):
-    """No tensor is saved for a backward pass while export, render or eval run: memory does
-    not grow with the number of integration steps."""
+def test_export_keeps_no_autograd_graph(run):
+    """No tensor is saved for a backward pass while export runs: memory does not grow with the
+    number of integration steps. (eval and render kept none before issue 13 either.)"""
     saved = []
     with torch.autograd.graph.saved_tensors_hooks(lambda x: saved.append(x.shape) or x, lambda x: x):
-        result = invoke(command[0], run, *command[1:])
+        result = invoke("export", run, "--time", 3)
     assert result.exit_code == 0, result.output
     assert saved == []
 
@@ -115,7 +114,7 @@ def test_far_export_matches_the_unchunked_integration(run, tmp_path, monkeypatch
 
 # --- 2. training into an existing run -----------------------------------------------------
 
-@pytest.mark.parametrize("extra", [(), ("--iterations", 8)])
+@pytest.mark.parametrize("extra", [("--iterations", 2), ("--iterations", 8, "--set", "train.seed=3")])
 def test_train_into_an_existing_run_is_refused(scene, run, extra):
     before = snapshot(run)
     result = invoke("train", scene, "--out", run, "--no-eval", *extra)
@@ -127,7 +126,7 @@ def test_readme_continue_line_without_resume_is_refused(run):
     """The README's continue line with --resume forgotten (no scene: the default scene would
     be generated into RUN/data)."""
     before = snapshot(run)
-    result = invoke("train", "--out", run, "--iterations", 5000)
+    result = invoke("train", "--out", run, "--iterations", 5)
     assert_refused(result, "--resume", "--overwrite")
     assert snapshot(run) == before and not (run / "data").exists()
 
@@ -170,7 +169,7 @@ def test_unwritable_output_is_reported_before_work(scene, run, tmp_path, command
     blocker = tmp_path / "blocker"
     blocker.write_text("a file, not a folder")
     before = snapshot(run)
-    args = {"train": ("train", scene, "--out", blocker / "run", "--no-eval"),
+    args = {"train": ("train", scene, "--out", blocker / "run", "--no-eval", "--iterations", 2),
             "eval": ("eval", run),
             "render": ("render", run, "--out", blocker / "renders"),
             "export": ("export", run, "--time", 1, "--out", blocker / "x.ply")}[command]
@@ -219,7 +218,7 @@ def test_full_disk_is_reported_naming_the_path_and_keeps_the_checkpoint(run, mon
 @pytest.mark.parametrize("command", ["train", "eval", "render", "export"])
 def test_missing_device_is_named_at_the_door(scene, run, tmp_path, command):
     before = snapshot(run)
-    args = {"train": ("train", scene, "--out", tmp_path / "new", "--no-eval"), "eval": ("eval", run),
+    args = {"train": ("train", scene, "--out", tmp_path / "new", "--no-eval", "--iterations", 2), "eval": ("eval", run),
             "render": ("render", run), "export": ("export", run, "--time", 1)}[command]
     result = invoke(*args, "--device", "cuda")
     assert_refused(result, "cuda", "available: cpu")
@@ -258,7 +257,7 @@ def test_images_smaller_than_the_ssim_window_are_rejected_at_load(tmp_path):
     assert invoke("make-scene", "spin", "--out", small, "--resolution", SSIM_WINDOW - 1, "--views", 3,
                   "--times", 5).exit_code == 0
     before = snapshot(small)
-    result = invoke("train", small, "--out", tmp_path / "run", "--no-eval")
+    result = invoke("train", small, "--out", tmp_path / "run", "--no-eval", "--iterations", 2)
     assert_refused(result, "SSIM", f"{SSIM_WINDOW - 1}x{SSIM_WINDOW - 1}", small)
     assert not (tmp_path / "run").exists() and snapshot(small) == before
 
@@ -278,10 +277,9 @@ def test_failure_before_the_first_checkpoint_leaves_no_run_folder(scene, tmp_pat
 @pytest.mark.parametrize("setting", ["train.seed=-1", "train.lr_means=-1", "physics.bounds_margin=-5",
                                      "physics.lambda_transport=-1e3", "train.lr_opacity=-1",
                                      "densify.grad_threshold=-1", "densify.prune_opacity=2", "densify.until=-5",
-                                     "densify.static_every=-1", "densify.opacity_reset_every=-1", "physics.ramp=-1",
-                                     "train.iterations=0", "model.step=0", "data.max_time=1.5"])
+                                     "densify.static_every=-1", "densify.opacity_reset_every=-1", "physics.ramp=-1"])
 def test_out_of_range_config_values_name_the_key(scene, tmp_path, setting):
-    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--set", setting)
+    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--iterations", 2, "--set", setting)
     assert_refused(result, "--set", setting.split("=")[0], "got")
     assert not (tmp_path / "run").exists()
 
@@ -289,7 +287,7 @@ def test_out_of_range_config_values_name_the_key(scene, tmp_path, setting):
 def test_out_of_range_value_in_a_config_file_names_file_and_key(scene, tmp_path):
     config = tmp_path / "my.toml"
     config.write_text("[densify]\nprune_opacity = 2.0\n")
-    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--config", config)
+    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--iterations", 2, "--config", config)
     assert_refused(result, config, "densify.prune_opacity")
     assert config.read_text() == "[densify]\nprune_opacity = 2.0\n" and not (tmp_path / "run").exists()
 
@@ -389,15 +387,20 @@ def test_one_bit_pngs_are_read(scene, tmp_path):
 
 
 def test_max_time_nan_names_the_flag(scene, tmp_path):
-    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--max-time", "nan")
+    result = invoke("train", scene, "--out", tmp_path / "run", "--no-eval", "--iterations", 2, "--max-time", "nan")
     assert_refused(result, "--max-time", "nan")
     assert not (tmp_path / "run").exists()
 
 
 def test_render_of_a_zero_velocity_field_warns_nothing(scene, tmp_path):
-    """deform-only has no velocity: the field figure draws zero-length arrows."""
+    """After one warm-up iteration the motion has not moved from its initialisation, whose
+    velocity is exactly zero: the field figure draws zero-length arrows."""
     run = tmp_path / "run"
-    assert train(scene, run, "--ablation", "deform-only", "--iterations", 1).exit_code == 0
+    assert train(scene, run, "--iterations", 1).exit_code == 0
+    from velogauss.train.checkpoint import load_model
+
+    model, _ = load_model(run)
+    assert not model.velocity_at(torch.rand(8, 3), 0.5).any()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = invoke("render", run, "--no-labels")
