@@ -169,7 +169,7 @@ def _eval_and_render(run_dir, model, cfg, data, lpips_weights):
     result = run_evaluation(run_dir, model, data, SPLIT_CHOICES["both"], lpips_weights)
     typer.echo(_headline(result, run_dir))
     written = run_render(run_dir / "renders", model, data, fps=8)
-    typer.echo(f"renders: {run_dir / 'renders'} ({len(written)} files: sequence.gif, filmstrip.png, "
+    typer.echo(f"renders: {run_dir / 'renders'} ({len(written)} files: sequence.mp4, sequence.gif, filmstrip.png, "
                "velocity_field.png, trajectories.png, frames/)")
 
 
@@ -205,8 +205,8 @@ def render_command(
     labels: bool = typer.Option(True, "--labels/--no-labels", help="Label strip and time bar on each frame."),
     device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
 ):
-    """Ground truth beside prediction over time (PNG frames, GIF, MP4 when imageio-ffmpeg is installed),
-    the learned velocity field and the Gaussians' trajectories."""
+    """Ground truth | prediction | absolute error over time, future marked (sequence.mp4, sequence.gif,
+    PNG frames), the learned velocity field and the Gaussians' trajectories."""
     with user_errors():
         if not fps > 0:
             raise ValueError(f"--fps: expected a positive number, got {fps!r}")
