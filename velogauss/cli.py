@@ -21,6 +21,7 @@ from typing import List, Optional
 import typer
 
 from velogauss.data import DataError
+from velogauss.sweep.command import sweep_command
 
 app = typer.Typer(
     name="velogauss",
@@ -256,6 +257,11 @@ def bench_command(
         # The results file is each benchmark's first parameter (named out_path or out).
         module.run(str(out), device=device)
     typer.echo(f"results: {out}")
+
+
+# --- sweep (velogauss/sweep) -----------------------------------------------------------
+
+app.command("sweep")(sweep_command)
 
 
 # --- walkthrough -----------------------------------------------------------------------
