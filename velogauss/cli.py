@@ -22,6 +22,7 @@ import typer
 
 from velogauss.data import DataError
 from velogauss.sweep.command import sweep_command
+from velogauss.view.command import view_command
 
 app = typer.Typer(
     name="velogauss",
@@ -259,9 +260,10 @@ def bench_command(
     typer.echo(f"results: {out}")
 
 
-# --- sweep (velogauss/sweep) -----------------------------------------------------------
+# --- sweep and view (velogauss/sweep, velogauss/view) ----------------------------------
 
 app.command("sweep")(sweep_command)
+app.command("view")(view_command)
 
 
 # --- walkthrough -----------------------------------------------------------------------
