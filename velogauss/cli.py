@@ -241,12 +241,12 @@ def export_command(
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion", "accuracy", "effects")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects", "viewer")
 
 
 @app.command("bench")
 def bench_command(
-    which: str = typer.Argument(..., help="raster | motion | accuracy | effects."),
+    which: str = typer.Argument(..., help="raster | motion | accuracy | effects | viewer."),
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):

@@ -221,3 +221,18 @@ def _environ():
     import os
 
     return dict(os.environ)
+
+
+def test_viewer_bench_quick(tmp_path):
+    from velogauss.bench import viewer
+
+    threads = torch.get_num_threads()
+    try:
+        rows = viewer.run(tmp_path / "RESULTS.md", quick=True, threads=1)
+    finally:
+        torch.set_num_threads(threads)
+    text = (tmp_path / "RESULTS.md").read_text()
+    assert viewer.SECTION in text and "Load average" in text
+    assert [r["kind"] for r in rows] == ["orbit", "orbit, moving (half resolution)", "play"]
+    assert all(r["fps"] > 0 and r["min"] <= r["fps"] <= r["max"] and r["cpu_s"] > 0 for r in rows)
+    assert sum(line.startswith("| ") for line in text.split(viewer.SECTION)[1].splitlines()) == 1 + len(rows)

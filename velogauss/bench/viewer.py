@@ -12,8 +12,11 @@ measured in interleaved rounds so that machine drift hits all alike:
 - orbit, moving: the same at half the resolution, what the viewer sends while the camera moves;
 - play: a new time every frame (motion integrated from t = 0, then rasterized).
 
-Reported: the median over rounds of each kind's frames per second, with the machine's load
-average before and after (the numbers are only as quiet as the machine was).
+Reported: the median over rounds of each kind's frames per second (wall clock), with the
+machine's load average before and after (the wall-clock numbers are only as quiet as the
+machine was), and the process's CPU time per frame (summed over its threads), which other
+work on the machine inflates far less: 1 / (CPU time per frame) is the frame rate the
+process reaches on one core of its own, a lower bound for what it reaches on two.
 Regenerate: python -m velogauss.bench.viewer --threads 2   (or: velogauss bench viewer)
 """
 
@@ -90,23 +93,28 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", n_points=10_000, size=25
     for render in kinds.values():  # warm-up: numba compilation, allocator
         render(0)
     fps = {name: [] for name in kinds}
+    cpu = {name: [] for name in kinds}
     for _ in range(rounds):
         for name, render in kinds.items():
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             for i in range(1, frames + 1):
                 render(i)
             fps[name].append(frames / (time.perf_counter() - start))
-    rows = [{"kind": name, "fps": statistics.median(v), "min": min(v), "max": max(v)} for name, v in fps.items()]
+            cpu[name].append((time.process_time() - start_cpu) / frames)
+    rows = [{"kind": name, "fps": statistics.median(v), "min": min(v), "max": max(v),
+             "cpu_s": statistics.median(cpu[name])} for name, v in fps.items()]
     _write(out_path, rows, n_points, len(renderer.model.gaussians), size, frames, rounds, threads, quick,
            load_before, os.getloadavg())
     return rows
 
 
 def _write(out_path, rows, n_points, n_gaussians, size, frames, rounds, threads, quick, load_before, load_after):
-    lines = ["| frame | pixels | frames/s (median) | range over rounds |", "|---|---|---:|---:|"]
+    lines = ["| frame | pixels | frames/s (median, wall clock) | range over rounds | CPU ms per frame "
+             "| 1 / CPU time (frames/s on one free core) |", "|---|---|---:|---:|---:|---:|"]
     for r in rows:
         pixels = f"{size // 2}²" if "half" in r["kind"] else f"{size}²"
-        lines.append(f"| {r['kind']} | {pixels} | {r['fps']:.1f} | {r['min']:.1f}–{r['max']:.1f} |")
+        lines.append(f"| {r['kind']} | {pixels} | {r['fps']:.1f} | {r['min']:.1f}–{r['max']:.1f} "
+                     f"| {1e3 * r['cpu_s']:.0f} | {1 / r['cpu_s']:.1f} |")
     options = [] if (n_points, size) == (10_000, 256) else [f"--points {n_points}", f"--size {size}"]
     text = "\n\n".join([
         SECTION,
