@@ -236,3 +236,36 @@ def test_viewer_bench_quick(tmp_path):
     assert [r["kind"] for r in rows] == ["orbit", "orbit, moving (half resolution)", "play"]
     assert all(r["fps"] > 0 and r["min"] <= r["fps"] <= r["max"] and r["cpu_s"] > 0 for r in rows)
     assert sum(line.startswith("| ") for line in text.split(viewer.SECTION)[1].splitlines()) == 1 + len(rows)
+
+
+def test_controls_drive_the_overlays_and_the_status(tiny_scene, model):
+    from velogauss.view.command import distinct_cameras
+    from velogauss.view.server import OVERLAY_GAUSSIANS, Viewer
+
+    viewer = Viewer(copy.deepcopy(model), distinct_cameras(tiny_scene), 0.75, 1.125, tiny_scene.background,
+                    "127.0.0.1", _free_port(), 32)
+    try:
+        assert viewer.time.value == 0.75 and "observed window" in viewer.status.content
+        viewer.time.value = 0.9
+        assert "future" in viewer.status.content
+        assert viewer._velocity is None and viewer._trajectories is None
+        viewer.show_velocity.value = True
+        viewer.show_trajectories.value = True
+        n = min(OVERLAY_GAUSSIANS, len(model.gaussians))
+        # Arrows start at the tracked positions at t and end ARROW_DT of motion further.
+        arrows = viewer._velocity.points
+        assert arrows.shape == (n, 2, 3)
+        with torch.no_grad():
+            start = model.tracked_positions(0.9)[viewer._overlay_gaussians()].numpy()
+        np.testing.assert_allclose(arrows[:, 0], start, rtol=1e-5, atol=1e-6)
+        # Trajectories: consecutive segments over [0, horizon] (with max_time inserted), red once t > max_time.
+        segments = viewer._trajectories.points
+        assert segments.shape[1:] == (2, 3) and segments.shape[0] % n == 0
+        assert {tuple(c) for c in viewer._trajectories.colors.reshape(-1, 3)} == {OBSERVED_COLOR, FUTURE_COLOR}
+        viewer.show_velocity.value = False
+        assert viewer._velocity is None
+        viewer.mode.value = "physics-only base state (ADF off)"
+        assert viewer.physics_only
+        assert len(viewer._frusta) == len(distinct_cameras(tiny_scene)) == 4
+    finally:
+        viewer.stop()

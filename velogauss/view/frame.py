@@ -59,13 +59,14 @@ class FrameRenderer:
     """Renders a trained `VeloGaussModel` for the viewer (see the module docstring).
 
     `background`: RGB (3,) in [0, 1]. Thread-safe: one frame at a time (torch and numba
-    already use every thread they were given).
+    already use every thread they were given); whoever else evaluates the model (the viewer's
+    overlays) holds `lock` too, since a frame switches the model's ADF off and on.
     """
 
     def __init__(self, model, background):
         self.model = model.eval()
         self.background = tuple(float(c) for c in background)
-        self._lock = threading.Lock()
+        self.lock = threading.RLock()
         self._key = None
         self._gaussians = None
         if model.motion is not None:
@@ -75,14 +76,14 @@ class FrameRenderer:
         """The `gaussians_at` dict at time t, of the full model or the physics-only base state."""
         key = (float(t), bool(physics_only))
         if key != self._key:
-            with torch.no_grad(), _adf(self.model, not physics_only):
+            with self.lock, torch.no_grad(), _adf(self.model, not physics_only):
                 self._gaussians = self.model.gaussians_at(float(t))
             self._key = key
         return self._gaussians
 
     def render(self, camera, t, physics_only=False):
         """The image (H, W, 3) float in [0, 1] (a NumPy array) of `camera` at time t."""
-        with self._lock, torch.no_grad():
+        with self.lock, torch.no_grad():
             image, _, _ = render_gaussians(self.gaussians(t, physics_only), camera, self.background)
             return image.detach().cpu().numpy()
 
@@ -91,13 +92,14 @@ def _remember_last(codes):
     """`codes` that returns its previous result when called again with equal positions (M, 3).
 
     The viewer only evaluates the model, so a cached result is never part of a backward pass."""
-    last = {}
+    last = [None]  # (x0, z), replaced as a whole so that a reader never pairs one's x0 with another's z
 
     def cached(x0):
-        if "x0" in last and last["x0"].shape == x0.shape and torch.equal(last["x0"], x0):
-            return last["z"]
+        entry = last[0]
+        if entry is not None and entry[0].shape == x0.shape and torch.equal(entry[0], x0):
+            return entry[1]
         z = codes(x0)
-        last.update(x0=x0.detach().clone(), z=z.detach())
+        last[0] = (x0.detach().clone(), z.detach())
         return z
 
     return cached

@@ -161,7 +161,7 @@ class Viewer:
         return self._overlay_index
 
     def _positions(self, t):
-        with torch.no_grad():
+        with self.renderer.lock, torch.no_grad():
             return self.model.tracked_positions(float(t))[self._overlay_gaussians()]
 
     def _update_overlays(self):
@@ -170,7 +170,7 @@ class Viewer:
         if self.show_velocity.value and self.model.has_velocity:
             t = float(self.time.value)
             x = self._positions(t)
-            with torch.no_grad():
+            with self.renderer.lock, torch.no_grad():
                 v = self.model.velocity_at(x, t)
             segments = torch.stack([x, x + ARROW_DT * v], dim=1).cpu().numpy().astype(np.float32)
             self._velocity = scene.add_line_segments("/velocity", segments, (255, 140, 0), thickness=2.0,
