@@ -235,3 +235,8 @@ def test_the_readme_grid_is_the_ten_default_runs(tmp_path):
         assert point_config(point, sweep.config, tmp_path).train == cli_default.train
         assert point_config(point, sweep.config, tmp_path).model == cli_default.model
     assert sweep.threads == 1 and sweep.scene_options == {}
+
+
+def test_sweep_help():
+    result = CliRunner().invoke(app, ["sweep", "--help"])
+    assert result.exit_code == 0 and "--address" in result.output

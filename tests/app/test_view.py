@@ -269,3 +269,8 @@ def test_controls_drive_the_overlays_and_the_status(tiny_scene, model):
         assert len(viewer._frusta) == len(distinct_cameras(tiny_scene)) == 4
     finally:
         viewer.stop()
+
+
+def test_view_help():
+    result = CliRunner().invoke(app, ["view", "--help"])
+    assert result.exit_code == 0 and "--host" in result.output and "127.0.0.1" in result.output
