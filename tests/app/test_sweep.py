@@ -74,12 +74,17 @@ scenes = ["toss"]
 ablations = ["full"]
 [grid.set]
 "model.integrator" = ["rk2"]
+[[grid]]
+scenes = ["grow"]
+threads = 2
 """)
     sweep = load_grid(path)
-    # 3 sources x 2 ablations x 2 seeds x 2 integrators; the second grid only repeats a point.
-    assert len(sweep.points) == 24 and sweep.out == Path("sweep") and sweep.threads == 1
+    # 3 sources x 2 ablations x 2 seeds x 2 integrators; the second grid only repeats a point
+    # (equal points merge), the third adds one with its own thread count.
+    assert len(sweep.points) == 25 and sweep.out == Path("sweep") and sweep.threads == 1
     names = [p.name for p in sweep.points]
-    assert names[0] == "toss-full-s0-model.integrator=rk2" and len(set(names)) == 24
+    assert names[0] == "toss-full-s0-model.integrator=rk2" and len(set(names)) == 25
+    assert [p.threads for p in sweep.points] == [1] * 24 + [2]
     lego = [p for p in sweep.points if p.scene is None]
     assert len(lego) == 8 and {p.data for p in lego} == {str((tmp_path / "folder/lego").resolve())}
     point = next(p for p in sweep.points if p.name == "spin-no-adf-s1-model.integrator=rk4")
@@ -95,6 +100,7 @@ ablations = ["full"]
     ("[[grid]]\nscenes = ['toss']\ncolour = 1", "colour"),
     ("[[grid]]\nablations = ['full']", "scenes"),
     ("threads = 0\n[[grid]]\nscenes = ['toss']", "threads"),
+    ("[[grid]]\nscenes = ['toss']\nthreads = 1.5", "grid\\[0\\].threads"),
     ("[[grid]]\nscenes = ['toss']\n[grid.set]\n'model.step' = 0.1", "model.step"),
     ("out = 'x'", "grid"),
     ("[[grid]\n", "not valid TOML"),

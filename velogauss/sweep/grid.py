@@ -12,6 +12,7 @@ names lists whose product is taken, and the sweep is the union of all its grids'
     resolution = 64
 
     [[grid]]
+    threads = 2                  # optional: this grid's runs get their own thread count
     scenes = ["toss", "spin"]    # catalogue scenes, generated into OUT/data/<scene>/
     data = ["data/lego"]         # and/or scene folders on disk (relative to the grid file)
     ablations = ["full", "no-adf"]        # default ["full"]
@@ -33,7 +34,7 @@ import tomllib
 from pathlib import Path
 
 SETTINGS = ("out", "threads", "config", "set", "scene_options", "grid")
-GRID_KEYS = ("scenes", "data", "ablations", "seeds", "set")
+GRID_KEYS = ("scenes", "data", "ablations", "seeds", "set", "threads")
 SCENE_OPTIONS = ("resolution", "n_views", "n_times", "seed", "n_points", "n_heldout")
 
 
@@ -43,7 +44,8 @@ class Point:
 
     `scene`: a catalogue scene name, or None when `data` (an absolute scene folder) is given;
     `overrides`: the `--set` items `("model.integrator=rk4", ...)`: the file's `[set]`, then
-    the point's values of its grid's `set` table; `settings`: `{key: value}` of the latter.
+    the point's values of its grid's `set` table; `settings`: `(key, value)` pairs of the
+    latter; `threads`: the CPUs its Ray task reserves and its torch/numba threads.
     """
 
     name: str
@@ -54,6 +56,7 @@ class Point:
     seed: int
     overrides: tuple[str, ...]
     settings: tuple[tuple[str, str], ...]
+    threads: int
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,9 +84,7 @@ def load_grid(path):
     except tomllib.TOMLDecodeError as err:
         raise ValueError(f"{path}: not valid TOML ({err})") from None
     _known(doc, SETTINGS, path, "")
-    threads = doc.get("threads", 1)
-    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-        raise ValueError(f"{path}: threads: expected a positive integer, got {threads!r}")
+    threads = _threads(doc, 1, path, "")
     options = doc.get("scene_options", {})
     if not isinstance(options, dict):
         raise ValueError(f"{path}: scene_options: expected a table")
@@ -99,6 +100,7 @@ def load_grid(path):
     for i, grid in enumerate(grids):
         where = f"grid[{i}]."
         _known(grid, GRID_KEYS, path, where)
+        grid_threads = _threads(grid, threads, path, where)
         scenes = _string_list(grid, "scenes", [], path, where)
         unknown = [s for s in scenes if s not in SCENES]
         if unknown:
@@ -126,7 +128,7 @@ def load_grid(path):
             name = "-".join([stem, ablation, f"s{seed}"] + [_slug(o) for o in swept])
             group = "-".join([stem, ablation] + [_slug(o) for o in swept])
             settings = tuple((k, str(v)) for k, v in zip(keys, values))
-            point = Point(name, group, scene, data, ablation, seed, common + swept, settings)
+            point = Point(name, group, scene, data, ablation, seed, common + swept, settings, grid_threads)
             if points.setdefault(name, point) != point:
                 raise ValueError(f"{path}: two different points are both named {name!r}; rename a data folder")
     out = doc.get("out")
@@ -136,6 +138,13 @@ def load_grid(path):
             raise ValueError(f"{path}: {key}: expected a path string, got {value!r}")
     return Sweep(path, None if out is None else Path(out), threads,
                  None if config is None else (path.parent / config).resolve(), dict(options), tuple(points.values()))
+
+
+def _threads(table, default, path, where):
+    threads = table.get("threads", default)
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"{path}: {where}threads: expected a positive integer, got {threads!r}")
+    return threads
 
 
 def _known(table, allowed, path, where):

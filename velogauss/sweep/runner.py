@@ -10,7 +10,7 @@
    (not touched) when it holds a different config, so nobody's results are overwritten;
    otherwise trained from the start. A config that does not resolve (a bad `set` value)
    fails that point alone.
-3. Submits one Ray task per point to train (`train_point`) with `num_cpus=sweep.threads`;
+3. Submits one Ray task per point to train (`train_point`) with `num_cpus=point.threads`;
    the task sets torch's and numba's thread counts to the same number before any heavy work.
    Exceptions inside a task, and a task whose worker died, become the point's recorded
    error; the other points go on.
@@ -153,10 +153,10 @@ def run_sweep(sweep, out_dir, address=None, cpus=None, echo=print):
         ray.init(address=address, include_dashboard=False, logging_level="WARNING", log_to_driver=False)
     try:
         remote = ray.remote(train_point)
-        pending = {remote.options(num_cpus=sweep.threads, name=p.point.name, max_retries=0)
-                   .remote(p, sweep.config, sweep.threads): p for p in todo}
-        echo(f"{len(todo)} run(s) on Ray ({ray.cluster_resources().get('CPU', 0):g} CPUs, "
-             f"{sweep.threads} per run); {len(plans) - len(todo)} already settled")
+        pending = {remote.options(num_cpus=p.point.threads, name=p.point.name, max_retries=0)
+                   .remote(p, sweep.config, p.point.threads): p for p in todo}
+        echo(f"{len(todo)} run(s) on Ray ({ray.cluster_resources().get('CPU', 0):g} CPUs); "
+             f"{len(plans) - len(todo)} already settled")
         while pending:
             [ref], _ = ray.wait(list(pending), num_returns=1)
             plan = pending.pop(ref)
