@@ -6,6 +6,7 @@ import base64
 import copy
 import io
 import json
+import os
 import re
 import shutil
 import socket
@@ -175,7 +176,7 @@ def test_viewer_serves_rendered_frames_to_headless_chromium(tiny_scene, tmp_path
     port = _free_port()
     env = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
     viewer = subprocess.Popen([sys.executable, "-m", "velogauss.cli", "view", str(run), "--port", str(port),
-                               "--threads", "1", "--resolution", "128"], cwd=ROOT, env={**_environ(), **env},
+                               "--threads", "1", "--resolution", "128"], cwd=ROOT, env={**os.environ, **env},
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     browser = None
     try:
@@ -215,12 +216,6 @@ def test_viewer_serves_rendered_frames_to_headless_chromium(tiny_scene, tmp_path
         if browser is not None:
             browser.kill()
             browser.wait(timeout=30)
-
-
-def _environ():
-    import os
-
-    return dict(os.environ)
 
 
 def test_viewer_bench_quick(tmp_path):
