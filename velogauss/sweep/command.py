@@ -30,7 +30,8 @@ def sweep_command(
             raise ValueError("velogauss sweep needs Ray: pip install 'velogauss[sweep]'")
     from velogauss.sweep.runner import run_sweep
 
-    outcomes = run_sweep(sweep, out, address=address, cpus=cpus, echo=typer.echo)
+    with user_errors():  # a bad scene_options value, an unreachable --address
+        outcomes = run_sweep(sweep, out, address=address, cpus=cpus, echo=typer.echo)
     failed = sorted(name for name, o in outcomes.items() if o["status"] == "failed")
     typer.echo(f"results: {Path(out) / 'results.md'}, {Path(out) / 'results.csv'}, {Path(out) / 'plots'}/")
     if failed:

@@ -150,7 +150,10 @@ def run_sweep(sweep, out_dir, address=None, cpus=None, echo=print):
     if address is None:
         ray.init(num_cpus=cpus, include_dashboard=False, logging_level="WARNING", log_to_driver=False)
     else:
-        ray.init(address=address, include_dashboard=False, logging_level="WARNING", log_to_driver=False)
+        try:
+            ray.init(address=address, include_dashboard=False, logging_level="WARNING", log_to_driver=False)
+        except (ConnectionError, RuntimeError) as err:
+            raise ValueError(f"--address: cannot join a Ray cluster at {address!r} ({err})") from None
     try:
         remote = ray.remote(train_point)
         pending = {remote.options(num_cpus=p.point.threads, name=p.point.name, max_retries=0)
