@@ -27,6 +27,8 @@ import typer
 from velogauss.config import EFFECTS, Ablation, load_config
 from velogauss.data import DataError
 from velogauss.io_utils import check_writable
+from velogauss.sweep.command import sweep_command
+from velogauss.view.command import view_command
 
 app = typer.Typer(
     name="velogauss",
@@ -237,7 +239,7 @@ def _eval_and_render(run_dir, model, cfg, data, lpips_weights):
     result = run_evaluation(run_dir, model, data, SPLIT_CHOICES["both"], lpips_weights)
     typer.echo(_headline(result, run_dir))
     written = run_render(run_dir / "renders", model, data, fps=8)
-    typer.echo(f"renders: {run_dir / 'renders'} ({len(written)} files: sequence.gif, filmstrip.png, "
+    typer.echo(f"renders: {run_dir / 'renders'} ({len(written)} files: sequence.mp4, sequence.gif, filmstrip.png, "
                "velocity_field.png, trajectories.png, frames/)")
 
 
@@ -274,8 +276,8 @@ def render_command(
     labels: bool = typer.Option(True, "--labels/--no-labels", help="Label strip and time bar on each frame."),
     device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
 ):
-    """Ground truth beside prediction over time (PNG frames, GIF, MP4 when imageio-ffmpeg is installed),
-    the learned velocity field and the Gaussians' trajectories."""
+    """Ground truth | prediction | absolute error over time, future marked (sequence.mp4, sequence.gif,
+    PNG frames), the learned velocity field and the Gaussians' trajectories."""
     with user_errors():
         if not fps > 0:
             raise ValueError(f"--fps: expected a positive number, got {fps!r}")
@@ -310,12 +312,12 @@ def export_command(
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export", "viewer")
 
 
 @app.command("bench")
 def bench_command(
-    which: str = typer.Argument(..., help="raster | motion | accuracy | effects | export."),
+    which: str = typer.Argument(..., help=" | ".join(BENCHMARKS) + "."),
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):
@@ -327,6 +329,12 @@ def bench_command(
         # The results file is each benchmark's first parameter (named out_path or out).
         module.run(str(out), device=device)
     typer.echo(f"results: {out}")
+
+
+# --- sweep and view (velogauss/sweep, velogauss/view) ----------------------------------
+
+app.command("sweep")(sweep_command)
+app.command("view")(view_command)
 
 
 # --- walkthrough -----------------------------------------------------------------------

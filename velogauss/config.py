@@ -243,6 +243,11 @@ def _merged(tree, document):
     return out
 
 
+def toml_value(value):
+    """`value` (bool, number, string or list of them) as TOML writes it after `key = `."""
+    return tomli_w.dumps({"v": value}).removeprefix("v = ").rstrip("\n")
+
+
 def _parse_value(text):
     try:
         return tomllib.loads(f"v = {text}")["v"]

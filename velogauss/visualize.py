@@ -4,10 +4,13 @@ field, and the Gaussians' trajectories.
 Everything is drawn off-screen (matplotlib's Agg backend, Pillow for the label strips) and
 written atomically (`velogauss.io_utils`). What `render_run` writes into its output folder:
 
-- `frames/NNN_t<time>_<observed|future>.png`: one camera's view over time, ground truth
-  (left) beside the prediction (right), with a label strip on top and a time bar below it
-  whose tick marks `max_time`, where the future begins;
-- `sequence.gif` (and `sequence.mp4` when `imageio-ffmpeg` is installed): those frames;
+- `frames/NNN_t<time>_<observed|future>.png`: one camera's view over time, side by side:
+  ground truth, the prediction and the absolute error `|gt - pred|` (mean over the colour
+  channels, `ERROR_COLORMAP` on [0, `ERROR_DISPLAY_MAX`]), with a label strip on top that
+  says "observed window" or "future (extrapolated)" and a time bar below it whose tick
+  marks `max_time`, where the future begins;
+- `sequence.mp4` (H.264 through the ffmpeg that `imageio-ffmpeg` ships) and `sequence.gif`:
+  those frames;
 - `filmstrip.png`: up to `FILMSTRIP_COLUMNS` of those times in a grid, ground truth above
   prediction, a vertical red line between the last observed and the first future column;
 - `velocity_field.png`: the learned field `velocity_at` on a grid over the slice through
@@ -21,7 +24,6 @@ written atomically (`velogauss.io_utils`). What `render_run` writes into its out
   material points in grey. A model without a velocity field gets no `velocity_field.png`.
 """
 
-import importlib.util
 from pathlib import Path
 
 import matplotlib
@@ -44,6 +46,11 @@ FIELD_GRID = 21
 # Small renders (the default synthetic scenes are 64 px) are enlarged by an integer factor,
 # nearest neighbour, so that every panel is at least this many pixels high on screen.
 MIN_PANEL_HEIGHT = 192
+# The error panel's colour scale: a display choice, not a threshold. A mean absolute error of
+# 0.25 (a quarter of the full intensity range) is already a wrong object, so saturating there
+# keeps small errors visible instead of spending the colour range on rare outliers.
+ERROR_DISPLAY_MAX = 0.25
+ERROR_COLORMAP = "inferno"
 _AXES = "xyz"
 _OBSERVED, _FUTURE = (0.15, 0.55, 0.25), (0.85, 0.2, 0.15)
 
@@ -65,28 +72,41 @@ def sequence_frames(interpolation, extrapolation):
     return sorted(chosen, key=lambda item: item[0].time)
 
 
-def comparison_image(gt, pred, time, future, max_time, label=True):
-    """Ground truth beside prediction, as one uint8 image `(H', W', 3)`.
+def error_image(gt, pred):
+    """The absolute error panel, `H×W×3` in [0, 1]: `mean_c |gt - pred|` of `gt`, `pred`
+    (`H×W×3` in [0, 1]) through `ERROR_COLORMAP` on [0, `ERROR_DISPLAY_MAX`] (clipped above)."""
+    error = np.abs(np.asarray(gt, dtype=np.float64) - np.asarray(pred, dtype=np.float64)).mean(axis=-1)
+    return matplotlib.colormaps[ERROR_COLORMAP](np.clip(error / ERROR_DISPLAY_MAX, 0.0, 1.0))[..., :3]
 
-    `gt`, `pred`: `H×W×3` in [0, 1]. With `label`, a strip on top names the panels and
-    the time, and a bar below shows `time` on [0, 1] with a tick at `max_time`, filled
+
+def comparison_image(gt, pred, time, future, max_time, label=True):
+    """Ground truth, prediction and absolute error side by side, as one uint8 image `(H', W', 3)`.
+
+    `gt`, `pred`: `H×W×3` in [0, 1]; the third panel is `error_image(gt, pred)`. Panels are
+    enlarged by an integer factor (nearest neighbour) to at least `MIN_PANEL_HEIGHT` pixels.
+    With `label`, a strip on top names the panels, the time and whether it is observed or
+    the future, and a bar below shows `time` on [0, 1] with a tick at `max_time`, filled
     green while observed and red in the future.
     """
-    pair = np.concatenate([to_uint8(gt), to_uint8(pred)], axis=1)
-    scale = max(1, -(-MIN_PANEL_HEIGHT // pair.shape[0]))
-    pair = np.repeat(np.repeat(pair, scale, axis=0), scale, axis=1)
+    panels = np.concatenate([to_uint8(gt), to_uint8(pred), to_uint8(error_image(gt, pred))], axis=1)
+    scale = max(1, -(-MIN_PANEL_HEIGHT // panels.shape[0]))
+    panels = np.repeat(np.repeat(panels, scale, axis=0), scale, axis=1)
     if not label:
-        return pair
-    h, w = pair.shape[:2]
+        return panels
+    h, w = panels.shape[:2]
+    panel = w // 3
     font = ImageFont.load_default()
-    strip, bar = 16, 10
+    strip, bar = 28, 10
     canvas = Image.new("RGB", (w, h + strip + bar), (255, 255, 255))
-    canvas.paste(Image.fromarray(pair), (0, strip))
+    canvas.paste(Image.fromarray(panels), (0, strip))
     draw = ImageDraw.Draw(canvas)
     status = "future (extrapolated)" if future else "observed window"
     draw.text((3, 2), "ground truth", fill=(0, 0, 0), font=font)
-    draw.text((w // 2 + 3, 2), f"prediction  t={time:.3f}  {status}", fill=(0, 0, 0), font=font)
-    draw.line([(w // 2, 0), (w // 2, strip)], fill=(128, 128, 128))
+    draw.text((panel + 3, 2), f"prediction  t={time:.3f}", fill=(0, 0, 0), font=font)
+    draw.text((panel + 3, 14), status, fill=tuple(int(255 * c) for c in (_FUTURE if future else _OBSERVED)), font=font)
+    draw.text((2 * panel + 3, 2), f"|error| (0 to {ERROR_DISPLAY_MAX:g})", fill=(0, 0, 0), font=font)
+    for x in (panel, 2 * panel):
+        draw.line([(x, 0), (x, strip)], fill=(128, 128, 128))
     y0 = h + strip + 2
     draw.rectangle([0, y0, w - 1, y0 + bar - 4], outline=(160, 160, 160))
     fill = _OBSERVED if not future else _FUTURE
@@ -231,11 +251,9 @@ def render_run(model, scene, out_dir, fps=8, ground_truth=None, label=True, prog
         write_png(path, picture.astype(np.float32) / 255.0)
         pictures.append(picture.astype(np.float32) / 255.0)
         written.append(path)
-    write_animation(out / "sequence.gif", pictures, fps)
-    written.append(out / "sequence.gif")
-    if importlib.util.find_spec("imageio_ffmpeg") is not None:
-        write_animation(out / "sequence.mp4", pictures, fps)
-        written.append(out / "sequence.mp4")
+    for name in ("sequence.mp4", "sequence.gif"):
+        write_animation(out / name, pictures, fps)
+        written.append(out / name)
     figures = [("filmstrip.png", lambda: filmstrip_figure(items, gts, preds, scene.max_time)),
                ("trajectories.png", lambda: trajectories_figure(model, scene.bounds, scene.max_time, ground_truth))]
     if model.has_velocity:

@@ -85,7 +85,7 @@ def test_cli_train_eval_render_export(tmp_path):
 
     result = runner.invoke(app, ["render", str(run), "--out", str(tmp_path / "renders")])
     assert result.exit_code == 0, result.output
-    for name in ("sequence.gif", "filmstrip.png", "velocity_field.png", "trajectories.png"):
+    for name in ("sequence.mp4", "sequence.gif", "filmstrip.png", "velocity_field.png", "trajectories.png"):
         assert (tmp_path / "renders" / name).stat().st_size > 0
 
     result = runner.invoke(app, ["export", str(run), "--time", "0.5", "--out", str(tmp_path / "g.ply")])

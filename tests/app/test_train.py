@@ -223,7 +223,7 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
     assert hasattr(reloaded.motion, "adf") == reloaded.spec.adf
     # Its pictures: a velocity field figure only where there is a velocity field.
     written = {p.name for p in render_run(reloaded, tiny_scene, tmp_path / "renders")}
-    assert {"sequence.gif", "filmstrip.png", "trajectories.png"} <= written
+    assert {"sequence.mp4", "sequence.gif", "filmstrip.png", "trajectories.png"} <= written
     assert ("velocity_field.png" in written) == has_velocity
 
 
