@@ -245,6 +245,8 @@ def _merged(tree, document):
 
 def toml_value(value):
     """`value` (bool, number, string or list of them) as TOML writes it after `key = `."""
+    if isinstance(value, (list, tuple)):  # on one line: it goes into `--set key=value` and run names
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
     return tomli_w.dumps({"v": value}).removeprefix("v = ").rstrip("\n")
 
 
