@@ -42,7 +42,7 @@ def view_command(
         scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
     from velogauss.view.server import Viewer
 
-    max_time = float(model.max_time)
+    max_time = float(cfg.data.max_time)
     on_cuda = next(model.parameters()).is_cuda
     viewer = Viewer(model, distinct_cameras(scene), max_time, horizon or max(1.5 * max_time, 1.0),
                     scene.background, host, port, resolution or (768 if on_cuda else 256))

@@ -9,13 +9,10 @@ used to start the orbit at a training camera and to draw the ground-truth frusta
 `torch.no_grad`, the model's Gaussians at time t (the full model, or the physics-only base
 state x*, q*, s* of VG-TRAJ, i.e. the ADF switched off, VG-ADF-COMPOSE) rasterized by
 `velogauss_fast.rasterize` with its default backend (numba on the CPU, gsplat or torch on
-CUDA). The Gaussians at one (t, mode) are kept, so orbiting at a fixed time only rasterizes,
-and the physics codes z = E(γ(x0)) (VG-CODE), which depend on the canonical positions alone,
-are computed once instead of at every time (half the cost of a new time on the CPU).
+CUDA). The Gaussians at one (t, mode) are kept, so orbiting at a fixed time only rasterizes.
 `annotate` writes onto the frame whether t is in the observed window or the future.
 """
 
-import contextlib
 import threading
 
 import numpy as np
@@ -60,7 +57,7 @@ class FrameRenderer:
 
     `background`: RGB (3,) in [0, 1]. Thread-safe: one frame at a time (torch and numba
     already use every thread they were given); whoever else evaluates the model (the viewer's
-    overlays) holds `lock` too, since a frame switches the model's ADF off and on.
+    overlays) holds `lock` too.
     """
 
     def __init__(self, model, background):
@@ -69,15 +66,16 @@ class FrameRenderer:
         self.lock = threading.RLock()
         self._key = None
         self._gaussians = None
-        if model.motion is not None:
-            model.motion.codes = _remember_last(model.motion.codes)
 
     def gaussians(self, t, physics_only=False):
         """The `gaussians_at` dict at time t, of the full model or the physics-only base state."""
         key = (float(t), bool(physics_only))
         if key != self._key:
-            with self.lock, torch.no_grad(), _adf(self.model, not physics_only):
-                self._gaussians = self.model.gaussians_at(float(t))
+            # Physics-only is the model's own spec with the ADF skipped (VG-ADF-COMPOSE).
+            spec = self.model.spec.without_adf() if physics_only else None
+            with self.lock, torch.no_grad():
+                means, quats, scales, _ = self.model.state_at(float(t), spec=spec)
+                self._gaussians = self.model.with_appearance(means, quats, scales)
             self._key = key
         return self._gaussians
 
@@ -88,32 +86,6 @@ class FrameRenderer:
             return image.detach().cpu().numpy()
 
 
-def _remember_last(codes):
-    """`codes` that returns its previous result when called again with equal positions (M, 3).
-
-    The viewer only evaluates the model, so a cached result is never part of a backward pass."""
-    last = [None]  # (x0, z), replaced as a whole so that a reader never pairs one's x0 with another's z
-
-    def cached(x0):
-        entry = last[0]
-        if entry is not None and entry[0].shape == x0.shape and torch.equal(entry[0], x0):
-            return entry[1]
-        z = codes(x0)
-        last[0] = (x0.detach().clone(), z.detach())
-        return z
-
-    return cached
-
-
-@contextlib.contextmanager
-def _adf(model, enabled):
-    """Switch the model's ADF on or off for the body (physics-only = ADF off, VG-ADF-COMPOSE)."""
-    previous = model.adf_enabled
-    model.adf_enabled = enabled and previous
-    try:
-        yield
-    finally:
-        model.adf_enabled = previous
 
 
 def annotate(image, t, max_time):

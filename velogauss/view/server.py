@@ -82,7 +82,7 @@ class Viewer:
         self.status = gui.add_markdown(self._status_text())
         self.play = gui.add_button("play", icon=viser.Icon.PLAYER_PLAY)
         self.playing = False
-        has_adf = self.model.motion is not None and self.model.motion.use_adf
+        has_adf = self.model.spec.adf
         self.mode = gui.add_dropdown("model", ("full (physics + ADF)", "physics-only base state (ADF off)"),
                                      disabled=not has_adf,
                                      hint="The physics-only base state x*, q*, s* is the model with its ADF off.")
