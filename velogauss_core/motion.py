@@ -1,15 +1,17 @@
 """The motion model's configuration and tables (spec/motion.md, "Parameters and configuration").
 
-One frozen `MotionConfig` is shared by `velogauss_ref` and `velogauss_fast`; each draws its
-parameter dict of this layout (`init_motion_params` in `velogauss_ref.motion.config` with
-NumPy, in `velogauss_fast.motion.params` with torch). Every list of choices is defined here
-once, as a `Literal` type and the tuple of its values.
+One frozen `MotionConfig` is shared by `velogauss_ref` and `velogauss_fast`, and one
+`init_motion_params` draws the parameter dict (NumPy arrays; the model converts them to
+tensors). Every list of choices is defined here once, as a `Literal` type and the tuple of
+its values.
 """
 
 from dataclasses import dataclass
 from typing import Literal, get_args
 
 import numpy as np
+
+from velogauss_core.constants import ACC_POLY_DEGREE
 
 # Number of affine basis velocity fields, the columns of Phi (VG-BASIS).
 N_BASIS = 12
@@ -93,6 +95,51 @@ def network_shapes(cfg: MotionConfig) -> dict[str, tuple[int, int]]:
         "adf": (3 * (1 + 2 * cfg.n_freqs_adf_x) + 1 + 2 * cfg.n_freqs_adf_t + L, ADF_OUTPUTS),
         "velocity_mlp": (3 * (1 + 2 * cfg.n_freqs_x) + 1, 3),
     }
+
+
+def init_motion_params(rng, cfg):
+    """A fresh parameter dict for `cfg` (`MotionConfig`), drawn from the NumPy Generator `rng`.
+
+    Layout (all float64 arrays; MLPs are lists of (W (d_in, d_out), b (d_out,)), sizes from
+    `network_shapes`):
+      "code": E, 3 (1 + 2 n_freqs_x) -> hidden^depth -> code_dim;
+      "mix":  [(A (code_dim, K), c (K,))], the pattern-mixing softmax of VG-COEF;
+      "time": 1 (1 + 2 n_freqs_t) -> hidden^depth -> K * 12, the motion patterns P(t);
+      "acc":  Q (ACC_POLY_DEGREE + 1, K, 12), the acceleration polynomial of VG-ACC;
+      "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10.
+    Hidden layers use PyTorch's default Linear initialisation (uniform within
+    +-1/sqrt(fan_in)). Three heads start at zero, so a fresh model is the still canonical
+    scene: the time network's last layer (no velocity), Q (no acceleration) and the ADF's
+    last layer (identity correction). Their gradients are not zero, so all of them learn.
+    """
+    L, K = cfg.code_dim, cfg.n_patterns
+    shapes = network_shapes(cfg)
+
+    def mlp(key, zero_last=False):
+        d_in, d_out = shapes[key]
+        return mlp_layers(rng, d_in, cfg.hidden, cfg.depth, d_out, zero_last=zero_last)
+
+    return {
+        "code": mlp("code"),
+        "mix": [(rng.standard_normal((L, K)) / np.sqrt(L), np.zeros(K))],
+        "time": mlp("time", zero_last=True),
+        "acc": np.zeros((ACC_POLY_DEGREE + 1, K, N_BASIS)),
+        "adf": mlp("adf", zero_last=True),
+    }
+
+
+def mlp_layers(rng, d_in, hidden, depth, d_out, zero_last=False):
+    """Layers (W (d_in, d_out), b) of an MLP d_in -> hidden^depth -> d_out, PyTorch-Linear init;
+    the last layer is zero when `zero_last`."""
+    dims = [d_in] + [hidden] * depth + [d_out]
+    layers = []
+    for k, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        bound = 1.0 / np.sqrt(a)
+        if zero_last and k == len(dims) - 2:
+            layers.append((np.zeros((a, b)), np.zeros(b)))
+        else:
+            layers.append((rng.uniform(-bound, bound, (a, b)), rng.uniform(-bound, bound, b)))
+    return layers
 
 
 def _check_int(name, value, low):

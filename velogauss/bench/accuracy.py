@@ -49,9 +49,7 @@ from velogauss.scenes.motions import RigidMotion
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
-from velogauss_core.motion import COLUMN_GROUPS
-from velogauss_core.motion import MotionConfig
-from velogauss_ref.motion.config import init_motion_params
+from velogauss_core.motion import COLUMN_GROUPS, init_motion_params, MotionConfig
 
 SECTION = "## Integrator accuracy vs time"
 COMMAND = "python -m velogauss.bench.accuracy"

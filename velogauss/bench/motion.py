@@ -43,8 +43,7 @@ from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.motion.velocity import _velocity_field
 from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.physics.residuals import physics_residuals
-from velogauss_core.motion import MotionConfig
-from velogauss_ref.motion.config import init_motion_params
+from velogauss_core.motion import init_motion_params, MotionConfig
 
 SECTION = "## Motion and residuals"
 COMMAND = "python -m velogauss.bench.motion"

@@ -5,7 +5,6 @@ into a `MotionSpec` (velogauss.model.spec); the model's parameters are laid out 
 """
 
 import numpy as np
-import torch
 
 from velogauss.model.dynamic import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
@@ -18,13 +17,11 @@ def build_model(cfg, profile: MotionProfile, points, colors, rng: np.random.Gene
     """A fresh model for `cfg` (velogauss.config.Config) and the scene's `profile`.
 
     points (M, 3) / colors (M, 3) or None: the initial Gaussian centres and colours;
-    rng: NumPy Generator; one draw from it seeds the torch Generator of the initial motion
-    weights, so a run's seed fixes them.
+    rng: NumPy Generator of the initial motion weights (`velogauss_core.motion.init_motion_params`).
     """
     m = cfg.model
     gaussians = Gaussians.from_points(points, colors, m.sh_degree, m.init_opacity)
-    generator = torch.Generator().manual_seed(int(rng.integers(2**63 - 1)))
-    return _assemble(cfg, profile, gaussians, generator)
+    return _assemble(cfg, profile, gaussians, rng)
 
 
 def model_from_state(cfg, profile: MotionProfile, state: dict) -> VeloGaussModel:
@@ -32,9 +29,8 @@ def model_from_state(cfg, profile: MotionProfile, state: dict) -> VeloGaussModel
     prefix = "gaussians."
     gstate = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
     gaussians = Gaussians.empty_like_state(gstate, cfg.model.sh_degree)
-    # The drawn values are overwritten by loading; a private generator leaves torch's global
-    # random state (a resumed run's) untouched.
-    return _assemble(cfg, profile, gaussians, torch.Generator().manual_seed(0))
+    # The drawn values are overwritten by loading; a private generator leaves the run's untouched.
+    return _assemble(cfg, profile, gaussians, np.random.default_rng(0))
 
 
 def scene_profile(cfg, metadata: dict | None) -> MotionProfile:
@@ -47,7 +43,7 @@ def profile_from_dict(values: dict) -> MotionProfile:
     return MotionProfile(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
 
 
-def _assemble(cfg, profile, gaussians, generator):
+def _assemble(cfg, profile, gaussians, rng):
     spec = resolve_motion_spec(cfg.model, profile, cfg.data.max_time)
-    motion = MotionParameters(spec, generator) if spec.moving else None
+    motion = MotionParameters(spec, rng) if spec.moving else None
     return VeloGaussModel(gaussians, motion, spec)

@@ -14,17 +14,18 @@ unconstrained velocity MLP ("mlp", no-pds) or neither (deform-only); the acceler
 polynomial Q only when the profile accelerates; the ADF only when the ablation keeps it.
 """
 
+import numpy as np
 import torch
 from torch import nn
 
 from velogauss.model.spec import MotionSpec
 from velogauss_core.constants import ACC_POLY_DEGREE
-from velogauss_core.motion import N_BASIS, network_shapes
+from velogauss_core.motion import N_BASIS, init_motion_params, mlp_layers, network_shapes
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import coefficients
 from velogauss_fast.motion.deform import adf_residual, compose_state
 from velogauss_fast.motion.integrate import integrate
-from velogauss_fast.motion.params import init_motion_params, mlp_layers
+from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.motion.velocity import mlp_velocity, velocity, velocity_field
 from velogauss_fast.physics.residuals import mlp_residuals, physics_residuals, transport_residual
@@ -35,17 +36,17 @@ class MotionParameters(nn.Module):
 
     Attributes (each a ParameterList of W, b, W, b, ...): code (VG-CODE), mix (VG-COEF),
     time (VG-COEF, velocity "affine"), velocity_mlp (velocity "mlp"), adf (VG-ADF); acc
-    (VG-ACC's Q, a Parameter) when the spec accelerates. generator: torch Generator of the
-    initial weights (`velogauss_fast.motion.params.init_motion_params`).
+    (VG-ACC's Q, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
+    weights (`velogauss_core.motion.init_motion_params`, then the velocity MLP's layers).
     """
 
-    def __init__(self, spec: MotionSpec, generator: torch.Generator | None = None):
+    def __init__(self, spec: MotionSpec, rng: np.random.Generator):
         super().__init__()
         if not spec.moving:
             raise ValueError("spec: a static scene has no motion parameters (spec.moving is False)")
         self.spec = spec
         cfg = spec.config
-        params = init_motion_params(cfg, generator)
+        params = params_to_torch(init_motion_params(rng, cfg), torch.float32, "cpu")
         self.code = _parameter_list(params["code"])
         self.mix = _parameter_list(params["mix"])
         if spec.velocity == "affine":
@@ -53,8 +54,8 @@ class MotionParameters(nn.Module):
         elif spec.velocity == "mlp":
             d_in, d_out = network_shapes(cfg)["velocity_mlp"]
             # Last layer zero: a still start, like the affine velocity's time network.
-            self.velocity_mlp = _parameter_list(mlp_layers(d_in, d_out, cfg.hidden, cfg.depth, generator,
-                                                           zero_last=True))
+            layers = mlp_layers(rng, d_in, cfg.hidden, cfg.depth, d_out, zero_last=True)
+            self.velocity_mlp = _parameter_list(params_to_torch(layers, torch.float32, "cpu"))
         if spec.acceleration:
             self.acc = nn.Parameter(params["acc"])
         if spec.adf:
@@ -143,7 +144,7 @@ def _integrated_state(params, spec, x0, q0, s0, z, t):
 
 
 def _parameter_list(layers):
-    return nn.ParameterList([nn.Parameter(a.detach().to(torch.float32)) for pair in layers for a in pair])
+    return nn.ParameterList([nn.Parameter(a) for pair in layers for a in pair])
 
 
 def _layers(plist):

@@ -4,7 +4,7 @@
 import numpy as np
 
 from velogauss_ref.motion.code import physics_code
-from velogauss_ref.motion.config import init_motion_params
+from velogauss_core.motion import init_motion_params
 from velogauss_ref.motion.deform import adf_residual, compose_state
 from velogauss_ref.motion.trajectory import base_state
 from velogauss.walkthrough.figures import new_figure, save

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from velogauss_ref.motion.config import mlp_layers
+from velogauss_core.motion import mlp_layers
 from velogauss_ref.nn import mlp, positional_encoding
 from velogauss.walkthrough.figures import new_figure, save
 from velogauss.walkthrough.printing import Section, session

@@ -4,8 +4,7 @@ motion parameters whose fields are known in closed form. Everything comes from f
 
 import numpy as np
 
-from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, MotionConfig, network_shapes
-from velogauss_ref.motion.config import init_motion_params, mlp_layers
+from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, init_motion_params, mlp_layers, MotionConfig, network_shapes
 
 # Far smaller networks than training's defaults (spec/motion.md: L = 16, K = 32, hidden 64,
 # depth 3), so that every example, and the per-point autograd residuals in particular, runs

@@ -10,8 +10,7 @@ import autograd.numpy as anp
 import numpy as np
 from autograd.misc import flatten
 
-from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, MotionConfig, network_shapes
-from velogauss_ref.motion.config import init_motion_params, mlp_layers
+from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, init_motion_params, mlp_layers, MotionConfig, network_shapes
 
 # Finite-difference step of the gradient checks that run through the networks
 # (check_grads_fd's default is 1e-6). At 1e-6 rounding of the differences (eps times the
