@@ -324,16 +324,16 @@ def export_command(
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export", "load")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export", "load", "step_profile")
 
 
 @app.command("bench")
 def bench_command(
-    which: str = typer.Argument(..., help="raster | motion | accuracy | effects | export | load."),
+    which: str = typer.Argument(..., help="raster | motion | accuracy | effects | export | load | step_profile."),
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):
-    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy, .effects, .export or .load) and record it in RESULTS.md."""
+    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy, .effects, .export, .load or .step_profile) and record it in RESULTS.md."""
     with user_errors():
         if which not in BENCHMARKS:
             raise ValueError(f"WHICH: expected one of {', '.join(BENCHMARKS)}, got {which!r}")

@@ -143,3 +143,22 @@ def test_load_bench_refuses_unknown_settings(tmp_path):
         load.run(str(tmp_path / "R.md"), settings=("fast",))
     with pytest.raises(ValueError, match="--device"):
         load.run(str(tmp_path / "R.md"), device="cuda")
+
+
+def test_step_profile_quick(tmp_path):
+    from velogauss.bench import step_profile
+
+    out = tmp_path / "RESULTS.md"
+    step_profile.main(["--quick", "--out", str(out)])
+    body = section(out.read_text(), "Training step profile")
+    assert "Regenerate: `python -m velogauss.bench.step_profile --quick`" in body
+    header, rows = table(body)
+    assert header == ["part", "ms per iteration", "% of the step", "calls per iteration"]
+    assert [row[0].replace("&nbsp;", "") for row in rows] == [label for label, _, _ in step_profile.PARTS]
+    # Every part was found in the profile (a renamed function would read 0 calls) and the
+    # step is one call per iteration; its parts are inside it.
+    calls = {row[0].replace("&nbsp;", ""): float(row[3]) for row in rows}
+    assert all(c > 0 for c in calls.values()), calls
+    assert calls["step (`_Loop.step`)"] == 1
+    step_ms = float(rows[0][1])
+    assert all(float(row[1]) <= step_ms for row in rows[1:] if row[0].startswith("&nbsp;"))
