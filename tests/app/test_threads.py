@@ -94,3 +94,13 @@ def test_threads_config_key_and_flag():
 
 def test_resume_may_change_the_threads():
     check_resume_config(load_config(), load_config(None, ["train.threads=2"]))
+
+
+def test_train_refuses_a_negative_thread_count(tmp_path):
+    from typer.testing import CliRunner
+
+    from velogauss.cli import app
+
+    result = CliRunner().invoke(app, ["train", "--out", str(tmp_path / "run"), "--threads", "-1"])
+    assert result.exit_code == 2 and "error: --threads: train.threads:" in result.output, result.output
+    assert not (tmp_path / "run").exists()
