@@ -12,6 +12,10 @@ and exits with code 2. Only the command-line boundary catches these errors (`Dat
 `ValueError`, `OSError`); anything else is a bug and keeps its traceback. Outputs are checked
 for writability before any work starts. Ctrl-C during training prints where the checkpoint
 is and exits with code 130.
+
+Threads (velogauss.threads): one torch thread, one compositing thread per available core and
+OpenMP's passive wait policy, unless `--threads N` (config `train.threads`) or the
+environment (OMP_WAIT_POLICY, OMP_NUM_THREADS) says otherwise.
 """
 
 import contextlib
@@ -24,11 +28,16 @@ from typing import List, Optional
 
 import typer
 
-from velogauss.config import EFFECTS, Ablation, load_config
-from velogauss.data import DataError
-from velogauss.io_utils import check_writable
-from velogauss.sweep.command import sweep_command
-from velogauss.view.command import view_command
+from velogauss.threads import prepare_environment
+
+# Before anything imports torch: libgomp reads its wait policy once, when it loads.
+prepare_environment()
+
+from velogauss.config import EFFECTS, Ablation, load_config  # noqa: E402
+from velogauss.data import DataError  # noqa: E402
+from velogauss.io_utils import check_writable  # noqa: E402
+from velogauss.sweep.command import sweep_command  # noqa: E402
+from velogauss.view.command import view_command  # noqa: E402
 
 app = typer.Typer(
     name="velogauss",
@@ -126,13 +135,18 @@ def train_command(
     iterations: Optional[int] = typer.Option(None, help="Training iterations."),
     resume: bool = typer.Option(
         False, "--resume", help="Continue the run in --out from its latest checkpoint; only train.iterations, "
-                                 "train.device, train.eval_every, train.checkpoint_every and data.dir may change."),
+                                 "train.device, train.threads, train.eval_every, train.checkpoint_every and data.dir "
+                                 "may change."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Start a new run in an --out that already holds one, "
                                                               "replacing its config, log and checkpoint."),
     max_time: Optional[float] = typer.Option(None, help="End of the observed window; later frames are the future [default 0.75]."),
     half_res: Optional[bool] = typer.Option(None, "--half-res/--full-res", help="Halve the image resolution."),
     background: Optional[str] = typer.Option(None, help="white | black | R,G,B in [0, 1]."),
     device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
+    threads: Optional[int] = typer.Option(
+        None, help="CPU threads for torch and the compositing kernels; 0: one torch thread and one compositing "
+                   "thread per available core, which holds up best when other processes share the cores "
+                   "[default: the config's train.threads, 0]."),
     evaluate: bool = typer.Option(True, "--eval/--no-eval", help="Evaluate and render after training."),
     lpips_weights: Optional[Path] = typer.Option(None, help=_LPIPS_HELP),
 ):
@@ -144,7 +158,7 @@ def train_command(
 
     with user_errors():
         flags = train_flags(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
-                            half_res=half_res, background=background, device=device)
+                            half_res=half_res, background=background, device=device, threads=threads)
         cfg_source = config
         if resume and overwrite:
             raise ValueError("--resume and --overwrite: choose one (continue the run, or replace it)")
@@ -312,7 +326,7 @@ def export_command(
 
 # --- bench -----------------------------------------------------------------------------
 
-BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export", "viewer")
+BENCHMARKS = ("raster", "motion", "accuracy", "effects", "export", "viewer", "load", "step_profile")
 
 
 @app.command("bench")
@@ -321,7 +335,7 @@ def bench_command(
     out: Path = typer.Option(Path("benchmarks/RESULTS.md"), "--out", "-o", help="Results file (its section is replaced)."),
     device: str = typer.Option("cpu", help="Torch device to benchmark on."),
 ):
-    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy, .effects or .export) and record it in RESULTS.md."""
+    """Run a benchmark (velogauss.bench.raster, .motion, .accuracy, .effects, .export, .load or .step_profile) and record it in RESULTS.md."""
     with user_errors():
         if which not in BENCHMARKS:
             raise ValueError(f"WHICH: expected one of {', '.join(BENCHMARKS)}, got {which!r}")
@@ -355,7 +369,7 @@ def walkthrough_command(
 # --- helpers shared by the commands ----------------------------------------------------
 
 def train_flags(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
-                device=None):
+                device=None, threads=None):
     """The config values the `train` flags given stand for: {"section.key": (flag, value)}
     (flags left at None are not given). Raises ValueError naming `--background` when malformed.
     """
@@ -367,6 +381,7 @@ def train_flags(effects=None, ablation=None, iterations=None, max_time=None, hal
         "data.half_res": ("--half-res", half_res),
         "data.background": ("--background", None if background is None else parse_background(background)),
         "train.device": ("--device", device),
+        "train.threads": ("--threads", threads),
     }
     return {key: pair for key, pair in pairs.items() if pair[1] is not None}
 
@@ -422,9 +437,12 @@ def load_run_model(run_dir, device=None):
     if not run_dir.is_dir():
         raise FileNotFoundError(2, "run folder not found", str(run_dir))
     _existing_file(run_dir / "checkpoints" / "latest.pt", "no checkpoint in the run folder (train it first)")
+    from velogauss.threads import apply_threads
     from velogauss.train.checkpoint import load_model
 
-    return load_model(run_dir, device or _default_device())
+    model, cfg = load_model(run_dir, device or _default_device())
+    apply_threads(cfg.train.threads)
+    return model, cfg
 
 
 def check_device(name, what="--device"):

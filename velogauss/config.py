@@ -98,6 +98,10 @@ class TrainConfig:
     iterations: Count = 3000
     seed: _int(ge=0) = 0  # NumPy refuses negative seeds
     device: str = "cpu"  # checked against this machine's devices by the command line
+    # CPU threads of torch and of the compositing kernels; 0: one torch thread for the many
+    # small operations, one compositing thread per available core (velogauss.threads, which
+    # says why). More than a machine has cores only makes threads wait for each other.
+    threads: _int(ge=0, le=1024) = 0
     warmup: _int(ge=0) = 200  # iterations on the t = 0 frames only, motion frozen
     curriculum: _int(ge=0) = 1200  # iterations over which the sampled times open up to max_time
     lr_means: Rate = 1.6e-4  # times the camera extent, decayed to lr_means_final
@@ -212,10 +216,11 @@ def to_toml(cfg):
 
 
 # What `--resume` may change: how long to train (the learning-rate decay then stretches to the
-# new end), on which device, how often to log and checkpoint, and where the scene folder now
+# new end), on which device and with how many threads, how often to log and checkpoint, and where the scene folder now
 # lies. Every other key shapes the model, its losses or its schedule, so a change would
 # make the checkpoint disagree with config.toml (or fail to load into the model).
-RESUME_SAFE_KEYS = ("train.iterations", "train.device", "train.eval_every", "train.checkpoint_every", "data.dir")
+RESUME_SAFE_KEYS = ("train.iterations", "train.device", "train.threads", "train.eval_every", "train.checkpoint_every",
+                    "data.dir")
 
 
 def check_resume_config(saved, cfg):

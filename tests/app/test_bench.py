@@ -3,6 +3,7 @@ writes a well-formed section of a results file. Timings are never asserted (the 
 shared); only the tables' structure and the benchmarks' own correctness checks are."""
 
 import json
+import os
 import re
 
 import pytest
@@ -112,3 +113,52 @@ def test_effects_bench_quick(tmp_path):
     assert 0 < frozen["moving"] < declared["moving"] == declared["n"]
     # A static scene builds no motion: its physics cost is exactly nothing.
     assert static["physics_s"] == 0.0 and every["physics_s"] > 0
+
+
+def test_load_bench_quick(tmp_path):
+    from velogauss.bench import load
+
+    out = tmp_path / "RESULTS.md"
+    load.main(["--quick", "--settings", "velogauss", "--workloads", "numba", "train", "--out", str(out)])
+    body = section(out.read_text(), "Contention")
+    assert "Regenerate: `python -m velogauss.bench.load --settings velogauss --workloads numba train --quick`" in body
+    header, rows = table(body)
+    assert header == ["setting", "workload", "idle (s)", "beside a busy process (s)", "beside a 2nd training (s)",
+                      "slowdown busy", "slowdown training", "threads (torch / compositing)"]
+    assert [row[:2] for row in rows] == [["velogauss", "numba"], ["velogauss", "train"]]
+    for row in rows:
+        idle, busy, training = (float(v) for v in row[2:5])
+        assert idle > 0 and busy > 0 and training > 0
+        # The ratios are the table's own times divided (3 significant digits printed).
+        assert float(row[5].rstrip("x")) == pytest.approx(busy / idle, rel=0.02, abs=0.01)
+        # The workers start without the caller's OMP_NUM_THREADS: the default setting's
+        # torch thread and one compositing thread per available core.
+        assert row[7] == f"1 / {len(os.sched_getaffinity(0))}"
+
+
+def test_load_bench_refuses_unknown_settings(tmp_path):
+    from velogauss.bench import load
+
+    with pytest.raises(ValueError, match="settings: unknown setting 'fast'"):
+        load.run(str(tmp_path / "R.md"), settings=("fast",))
+    with pytest.raises(ValueError, match="--device"):
+        load.run(str(tmp_path / "R.md"), device="cuda")
+
+
+def test_step_profile_quick(tmp_path):
+    from velogauss.bench import step_profile
+
+    out = tmp_path / "RESULTS.md"
+    step_profile.main(["--quick", "--out", str(out)])
+    body = section(out.read_text(), "Training step profile")
+    assert "Regenerate: `python -m velogauss.bench.step_profile --quick`" in body
+    header, rows = table(body)
+    assert header == ["part", "ms per iteration", "% of the step", "calls per iteration"]
+    assert [row[0].replace("&nbsp;", "") for row in rows] == [label for label, _, _ in step_profile.PARTS]
+    # Every part was found in the profile (a renamed function would read 0 calls) and the
+    # step is one call per iteration; its parts are inside it.
+    calls = {row[0].replace("&nbsp;", ""): float(row[3]) for row in rows}
+    assert all(c > 0 for c in calls.values()), calls
+    assert calls["step (`_Loop.step`)"] == 1
+    step_ms = float(rows[0][1])
+    assert all(float(row[1]) <= step_ms for row in rows[1:] if row[0].startswith("&nbsp;"))

@@ -18,7 +18,7 @@ from tests.fast.test_raster import composite_and_gradients, composite_inputs
 from velogauss_fast import composite as compositing
 from velogauss_fast import raster
 from velogauss_fast.spans import SPAN_COLUMNS, pair_table, row_spans
-from velogauss_fast.backends import numba_kernels
+from velogauss_fast.backends import numba_backend, numba_kernels
 from velogauss_fast.backends.numba_backend import CompositeNumba, _parameters
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
@@ -110,18 +110,18 @@ def test_thread_count_changes_nothing_but_rounding():
     scene = random_scene(rng, 200, 33, 17, scale_px=(1.0, 5.0), opacity=(0.2, 1.0))
     scene["background"] = rng.uniform(size=3)
     cot = [torch.from_numpy(rng.standard_normal(s)) for s in ((17, 33, 3), (17, 33, 1))]
-    threads = torch.get_num_threads()
+    previous = numba_backend.set_num_threads(0)
     results = []
     try:
         for n in (1, 2, 5):
-            torch.set_num_threads(n)
+            numba_backend.set_num_threads(n)
             t = scene_to_torch(scene, torch.float64, "cpu", requires_grad=True)
             image, alpha, _ = raster.rasterize(**t, backend="numba")
             grads = torch.autograd.grad((image * cot[0]).sum() + (alpha * cot[1]).sum(),
                                         [t[k] for k in ("means", "quats", "scales", "opacities", "colors")])
             results.append((image, alpha, grads))
     finally:
-        torch.set_num_threads(threads)
+        numba_backend.set_num_threads(previous)
     (image_1, alpha_1, grads_1), *others = results
     for image, alpha, grads in others:
         # Each pixel is composited by one part, in rank order: bit for bit.

@@ -30,6 +30,7 @@ from velogauss.model import build_model, model_from_state, scene_profile
 from velogauss.model.build import profile_from_dict
 from velogauss.model.dynamic import render_gaussians
 from velogauss.model.motion import motion_residuals
+from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.optim import make_optimizer, set_learning_rates
@@ -51,8 +52,21 @@ def train(cfg, data, run_dir, resume=False, progress=True):
 
     cfg: velogauss.config.Config; run_dir: the run folder (config.toml, checkpoints/,
     log.jsonl); resume: continue from `run_dir`'s latest checkpoint (the config must match
-    the one it was trained with, except `train.iterations`, which may grow).
+    the one it was trained with, except `train.iterations`, which may grow). Sets torch's and
+    the compositing kernels' CPU threads from `train.threads` (velogauss.threads).
     """
+    loop, start = prepare(cfg, data, run_dir, resume)
+    loop.run(start, progress)
+    return loop.model.eval()
+
+
+def prepare(cfg, data, run_dir, resume=False):
+    """The training state of `train` before its first iteration: (loop, first iteration).
+
+    Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `loop.step(it)`
+    and `loop.maintain(it + 1)` then run iteration `it` (the contention benchmark times them).
+    """
+    apply_threads(cfg.train.threads)
     check_trainable_size(data)
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
@@ -87,9 +101,7 @@ def train(cfg, data, run_dir, resume=False, progress=True):
     if resume:
         optimizer.load_state_dict(payload["optimizer"])
         stats.load_state_dict(payload["density"])
-    loop = _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device)
-    loop.run(start, progress)
-    return model.eval()
+    return _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device), start
 
 
 class _Loop:

@@ -9,8 +9,10 @@ exp). The kernels compute in float64 whatever the working dtype (inputs are cast
 outputs cast back), so a float32 render differs from the reference only by its float32
 inputs.
 
-The kernels release the GIL; one part of the image rows runs per torch CPU thread
-(torch.get_num_threads()), in a thread pool.
+The kernels release the GIL; one part of the image rows runs per compositing thread, in a
+thread pool of Python threads (which wait on a lock, never spin). Their number is
+`set_num_threads(n)`'s, else torch's (torch.get_num_threads()): velogauss.threads gives
+torch one thread for its many small operations and these kernels one per core.
 """
 
 import threading
@@ -24,6 +26,22 @@ from velogauss_fast.backends import numba_kernels as nk
 _POOL = None
 _POOL_SIZE = 0
 _POOL_LOCK = threading.Lock()
+_THREADS = 0  # 0: follow torch.get_num_threads()
+
+
+def set_num_threads(n):
+    """Compositing threads of this backend (n >= 1), or 0 to follow torch.get_num_threads();
+    returns the previous setting."""
+    global _THREADS
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise ValueError(f"n: expected an integer >= 0 (0: torch's thread count), got {n!r}")
+    previous, _THREADS = _THREADS, n
+    return previous
+
+
+def get_num_threads():
+    """The compositing threads a render uses: set_num_threads's, else torch's."""
+    return _THREADS or torch.get_num_threads()
 
 
 def _run_parts(kernel, n_parts, *args):
@@ -63,7 +81,7 @@ class CompositeNumba(torch.autograd.Function):
         trans = np.ones(n_pix)
         last = np.full(n_pix, -1, dtype=np.int64)
         done = np.zeros(n_pix, dtype=np.uint8)
-        n_parts = max(1, min(torch.get_num_threads(), spans.height))
+        n_parts = max(1, min(get_num_threads(), spans.height))
         counts = np.zeros(n_parts, dtype=np.int64)
         nk.count_pairs(n_parts, prm.numpy(), spans.width, counts)
         alphas = [np.empty(c) for c in counts]
