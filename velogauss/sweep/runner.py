@@ -89,12 +89,10 @@ def train_point(plan, config_path, threads):
     Returns `{"status": "ok", "metrics": {...}, "wall_s": float}` or
     `{"status": "failed", "error": "<exception type>: <message>", "traceback": str}`.
     """
-    import numba
-    import torch
+    from velogauss.threads import apply_threads
 
     # Before any heavy work: this run may use exactly the CPUs Ray reserved for it.
-    torch.set_num_threads(threads)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    apply_threads(threads)
     start = time.perf_counter()
     try:
         from velogauss.cli import load_run_scene, run_evaluation

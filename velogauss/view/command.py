@@ -17,13 +17,14 @@ def view_command(
         None, help="End of the time slider [default: max(1.5 × max_time, 1.0)]; beyond max_time is the future."),
     resolution: Optional[int] = typer.Option(
         None, help="Longer side of a still frame in pixels [default: 256 on the CPU, 768 on CUDA]."),
-    threads: Optional[int] = typer.Option(None, help="Torch/numba threads on the CPU [default: all cores]."),
+    threads: Optional[int] = typer.Option(None, help="CPU threads for torch and the compositing kernels [default: velogauss.threads' choice, see the README]."),
     data: Optional[Path] = typer.Option(None, "--data", help="Scene folder [default: the one the run was trained on]."),
     device: Optional[str] = typer.Option(None, help="Torch device: cpu, cuda ... [default: cuda when available]."),
 ):
     """Explore a trained run in the browser: orbit the scene, scrub or play time past the observed window
     into the future, show velocity arrows, trajectories and the ground-truth cameras."""
     from velogauss.cli import _recorded_data_dir, load_run_model, load_run_scene, user_errors
+    from velogauss.threads import apply_threads
 
     with user_errors():
         if importlib.util.find_spec("viser") is None:
@@ -37,7 +38,7 @@ def view_command(
         if not 0 < port < 65536:
             raise ValueError(f"--port: expected 1 to 65535, got {port!r}")
         _check_port_free(host, port)
-        _set_threads(threads)
+        apply_threads(threads or 0)
         model, cfg = load_run_model(run_dir, device)
         scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
     from velogauss.view.server import Viewer
@@ -74,13 +75,3 @@ def _check_port_free(host, port):
     except OSError as err:
         raise ValueError(f"--port: cannot serve on {host}:{port} ({err.strerror}); "
                          "pick another port with --port or another address with --host") from None
-
-
-def _set_threads(threads):
-    if threads is None:
-        return
-    import numba
-    import torch
-
-    torch.set_num_threads(threads)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
