@@ -18,6 +18,8 @@ from velogauss_ref.motion.config import MotionConfig
 
 ABLATIONS = ("full", "no-pds", "no-adf", "no-gpc", "deform-only")
 INTEGRATORS = ("euler", "rk2", "rk4")
+# Training schemes (spec/motion.md): "integrate" (a) VG-TRAJ + VG-ADF from t = 0; "adf-step" (b) VG-CARRY.
+SCHEMES = ("integrate", "adf-step")
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,8 @@ class ModelConfig:
     # at max_time instead of evaluating sinusoids of an unseen t (ablation deform-only,
     # a DefGS-style model, evaluates the network at every t, as DefGS does).
     adf_clamp_time: bool = True
+    scheme: str = "integrate"  # one of SCHEMES; chosen by benchmarks/FIDELITY.md
+    carry_offset: float = 0.05  # scheme "adf-step": |t - t_start| of VG-CARRY in the window (one frame of 21)
     init_points: int = 5000  # random initial Gaussians when the scene has no points3d.ply
     init_opacity: float = 0.1
 
@@ -85,6 +89,7 @@ class TrainConfig:
     # Iteration at which the ADF starts learning; -1: once the curriculum has opened the
     # whole window (warmup + curriculum), or with the motion for deform-only.
     adf_start: int = -1
+    motion_only: bool = False  # after the warm-up only the motion trains (the error budget's optimisation floor)
     eval_every: int = 500  # PSNR on the interpolation split -> log.jsonl
     checkpoint_every: int = 500
 
@@ -252,6 +257,8 @@ def _validate(cfg, source):
         ("model.ablation", m.ablation in ABLATIONS, f"one of {', '.join(ABLATIONS)}"),
         ("model.integrator", m.integrator in INTEGRATORS, f"one of {', '.join(INTEGRATORS)}"),
         ("model.step", m.step > 0, "a positive step"),
+        ("model.scheme", m.scheme in SCHEMES, f"one of {', '.join(SCHEMES)}"),
+        ("model.carry_offset", m.carry_offset >= 0, "a step >= 0"),
         ("model.sh_degree", 0 <= m.sh_degree <= 3, "0, 1, 2 or 3"),
         ("model.effects", m.effects == "auto" or (isinstance(m.effects, tuple) and m.effects), '"auto" or a list'),
         ("model.incompressible", m.incompressible == "auto" or isinstance(m.incompressible, bool), '"auto", true or false'),

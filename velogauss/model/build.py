@@ -77,4 +77,4 @@ def _assemble(cfg, profile, gaussians, rng):
                              rng)
     # deform-only is a DefGS-style model: its deformation network is evaluated at every t.
     clamp = m.adf_clamp_time and m.ablation != "deform-only"
-    return VeloGaussModel(gaussians, motion, cfg.data.max_time, adf_clamp_time=clamp)
+    return VeloGaussModel(gaussians, motion, cfg.data.max_time, adf_clamp_time=clamp, scheme=m.scheme)

@@ -9,6 +9,8 @@ their canonical state, so the cost of motion grows with the moving part of the s
 Ablations: "no-adf" drops the ADF, "deform-only" drops the velocity (x* = x0: a
 DefGS-style deformation model, its ADF evaluated at every t), and a static profile builds
 no motion at all.
+Scheme "adf-step" (scheme (b), VG-CARRY) replaces the first two
+lines: the ADF's state at a start time is carried to t by the velocity.
 """
 
 import torch
@@ -17,6 +19,7 @@ from torch import nn
 from velogauss_fast.motion.deform import compose_state
 from velogauss_fast.motion.trajectory import normalize_quat
 from velogauss_fast.raster import rasterize
+from velogauss_ref.motion.carry import carry_start
 
 
 class VeloGaussModel(nn.Module):
@@ -26,12 +29,13 @@ class VeloGaussModel(nn.Module):
     the observed window; adf_clamp_time: hold the ADF at max_time beyond it.
     """
 
-    def __init__(self, gaussians, motion, max_time, adf_clamp_time=True):
+    def __init__(self, gaussians, motion, max_time, adf_clamp_time=True, scheme="integrate"):
         super().__init__()
         self.gaussians = gaussians
         self.motion = motion
         self.max_time = float(max_time)
         self.adf_clamp_time = bool(adf_clamp_time)
+        self.scheme = scheme  # velogauss.config.SCHEMES
         # Training switches the ADF off until it starts learning (velogauss.train.loop): its
         # last layer starts at zero, so skipping it is then exactly the identity, and cheaper.
         self.adf_enabled = True
@@ -46,8 +50,12 @@ class VeloGaussModel(nn.Module):
     def sh_degree(self):
         return self.gaussians.sh_degree
 
-    def state_at(self, t):
-        """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t."""
+    def state_at(self, t, offset=0.0):
+        """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t.
+
+        offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY); the
+        base means are then the means.
+        """
         g = self.gaussians
         x0, q0, s0 = g.means, normalize_quat(g.quats), g.scales
         if self.motion is None or not bool(self.moving.any()):
@@ -55,6 +63,10 @@ class VeloGaussModel(nn.Module):
         idx = torch.nonzero(self.moving).squeeze(1)
         x0m, q0m, s0m = x0.index_select(0, idx), q0.index_select(0, idx), s0.index_select(0, idx)
         z = self.motion.codes(x0m)
+        if self.scheme == "adf-step" and self.has_velocity and self.motion.use_adf and self.adf_enabled:
+            x, q, s = self.motion.carried_state(x0m, q0m, s0m, z, t, carry_start(t, offset, self.max_time))
+            return (x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s),
+                    x0.index_copy(0, idx, x))
         if self.has_velocity:
             xs, qs, ss = self.motion.base_state(x0m, q0m, s0m, z, t)
         else:

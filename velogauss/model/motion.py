@@ -17,8 +17,9 @@ from torch import nn
 from torch.func import jvp
 
 from velogauss.config import INTEGRATORS
+from velogauss_fast.motion.carry import carried_state
 from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.deform import adf_residual
+from velogauss_fast.motion.deform import adf_residual, compose_state
 from velogauss_fast.motion.integrate import integrate
 from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.motion.coefficients import coefficients
@@ -91,6 +92,20 @@ class MotionModel(nn.Module):
             return base_state(self.params(), x0, q0, s0, z, t, self.step, self.integrator, self.cfg)
         x = integrate(lambda y, tau: self._mlp_velocity(y, tau), x0, 0.0, t, self.step, self.integrator)
         return x, q0, s0
+
+    def base_state_from(self, x, q, s, z, t0, t):
+        """The state (x, q, s) at t0 advanced to t by the affine velocity (VG-STEP)."""
+        return base_state(self.params(), x, q, s, z, t, self.step, self.integrator, self.cfg, t0=t0)
+
+    def carried_state(self, x0, q0, s0, z, t, t_start):
+        """(x, q, s) at time t of scheme (b): the ADF's state at t_start carried to t by the
+        velocity (VG-CARRY). Without PDS the MLP velocity carries positions only."""
+        if self.pds:
+            return carried_state(self.params(), x0, q0, s0, z, t, t_start, self.step, self.integrator, self.cfg)
+        xa, qa, sa = compose_state(x0, q0, s0, *self.adf_residual(x0, t_start, z))
+        xs = xa.detach()
+        xv = integrate(lambda y, tau: self._mlp_velocity(y, tau), xs, t_start, t, self.step, self.integrator)
+        return xa + (xv - xs), qa, sa
 
     def adf_residual(self, x0, t, z):
         """(dx, dq, ds) of the auxiliary deformation field (VG-ADF)."""

@@ -101,7 +101,9 @@ class _Loop:
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
         # deform-only has no velocity to learn first: its ADF is the motion and starts with it.
-        default_start = cfg.train.warmup if not model.has_velocity else cfg.train.warmup + cfg.train.curriculum
+        # Under scheme "adf-step" the ADF is the motion inside the window (VG-CARRY): it starts with the motion too.
+        adf_first = not model.has_velocity or cfg.model.scheme == "adf-step"
+        default_start = cfg.train.warmup if adf_first else cfg.train.warmup + cfg.train.curriculum
         self.adf_start = default_start if cfg.train.adf_start < 0 else cfg.train.adf_start
 
     def run(self, start, progress):
@@ -141,7 +143,7 @@ class _Loop:
         motion_on = model.motion is not None and it >= cfg.train.warmup
         if model.motion is not None:
             self.freeze_motion(it)
-        means, quats, scales, base = model.state_at(frame.time)
+        means, quats, scales, base = model.state_at(frame.time, self.carry_offset(it))
         image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
         meta["mean2d"].retain_grad()
         loss = photometric_loss(image, gt)
@@ -170,10 +172,20 @@ class _Loop:
         t = self.cfg.train
         motion = self.model.motion
         motion.requires_grad_(it >= t.warmup)
+        if t.motion_only:
+            self.model.gaussians.requires_grad_(it < t.warmup)
         if motion.use_adf:
             adf_on = it >= self.adf_start
             motion.adf.requires_grad_(adf_on)
             self.model.adf_enabled = adf_on
+
+    def carry_offset(self, it):
+        """Scheme "adf-step": the signed step ±carry_offset of VG-CARRY, a fair coin per
+        iteration once the motion trains (the authors' released code); else 0."""
+        m = self.cfg.model
+        if m.scheme != "adf-step" or it < self.cfg.train.warmup:
+            return 0.0
+        return m.carry_offset * (1.0 if self.rng.random() < 0.5 else -1.0)
 
     def physics_loss(self, it):
         """Ramped VG-LOSS-PHYS on fresh collocation points."""

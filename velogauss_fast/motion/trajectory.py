@@ -13,8 +13,9 @@ from velogauss_fast.motion.scalars import check_time, times_tensor
 from velogauss_ref.constants import QUAT_ZERO_NORM_SQ
 
 
-def base_state(params, x0, q0, s0, z, t, h, method, cfg):
-    """Integrate (x, q, log s) from 0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ).
+def base_state(params, x0, q0, s0, z, t, h, method, cfg, t0=0.0):
+    """Integrate (x, q, log s) from t0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ;
+    VG-STEP: a start time t0 other than 0, the state (x0, q0, s0) then being the state at t0).
 
     params: motion parameter dict; x0: (N, 3) canonical means; q0: (N, 4) quaternions (any
     norm); s0: (N, 3) positive scales; z: (N, L) frozen physics codes; t: scalar target time
@@ -37,7 +38,8 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         raise ValueError("s0: expected positive scales")
     check_array("z", z, (n, params["mix"][0][0].shape[0]))
     check_time("t", t)
-    taus = stage_times(0.0, t, h, method)
+    check_time("t0", t0)
+    taus = stage_times(t0, t, h, method)
     plan = rate_plan(cfg.mask, x0.dtype, x0.device)
     lay = plan.layout
     if not lay.columns:
@@ -51,7 +53,7 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         return state_rates(plan, next(stage_w), y, RR0)
 
     parts = [x0.T] + [q0.T] * lay.rotation + [torch.log(s0).T] * lay.strain
-    y = integrate(rates, torch.cat(parts), 0.0, t, h, method)  # [rows, N], component-major
+    y = integrate(rates, torch.cat(parts), t0, t, h, method)  # [rows, N], component-major
     q = y[3:7].T if lay.rotation else q0
     s = torch.exp(y[lay.width:].T) if lay.strain else s0
     return y[:3].T, normalize_quat(q), s
