@@ -89,6 +89,9 @@ class TrainConfig:
     # Iteration at which the ADF starts learning; -1: once the curriculum has opened the
     # whole window (warmup + curriculum), or with the motion for deform-only.
     adf_start: int = -1
+    lambda_carry: float = 0.0  # scheme "adf-step": weight of VG-LOSS-CARRY (velocity fitted to the ADF's paths); 0 disables
+    carry_horizon: float = 0.25  # VG-LOSS-CARRY: largest |t - t_a| drawn (normalised time)
+    carry_points: int = 2048  # VG-LOSS-CARRY: moving Gaussians drawn per iteration
     motion_only: bool = False  # after the warm-up only the motion trains (the error budget's optimisation floor)
     eval_every: int = 500  # PSNR on the interpolation split -> log.jsonl
     checkpoint_every: int = 500
@@ -106,6 +109,8 @@ class PhysicsConfig:
     ramp: int = 1200  # iterations over which both weights rise linearly from 0
     n_points: int = 1024  # collocation points per iteration, one random time each
     bounds_margin: float = 0.1  # the box grows by this fraction of its size on each side
+    placement: str = "box"  # collocation points: "box" (uniform in the grown box) or "gaussians" (near the moving Gaussians at t)
+    jitter: float = 0.02  # placement "gaussians": normal offset, as a fraction of the box diagonal
 
 
 @dataclass(frozen=True)
@@ -267,7 +272,11 @@ def _validate(cfg, source):
         ("train.eval_every", t.eval_every >= 0, ">= 0 (0 disables)"),
         ("train.checkpoint_every", t.checkpoint_every >= 0, ">= 0 (0: only at the end)"),
         ("train.adf_start", t.adf_start >= -1, ">= 0, or -1 for the default"),
+        ("train.lambda_carry", t.lambda_carry >= 0, ">= 0"),
+        ("train.carry_horizon", t.carry_horizon > 0, "> 0"),
+        ("train.carry_points", t.carry_points >= 1, "at least 1"),
         ("physics.n_points", p.n_points >= 1, "at least 1"),
+        ("physics.placement", p.placement in ("box", "gaussians"), '"box" or "gaussians"'),
         ("densify.every", d.every >= 1, "at least 1"),
         ("densify.max_gaussians", d.max_gaussians >= 1, "at least 1"),
     ]

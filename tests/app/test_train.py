@@ -236,3 +236,56 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
         z0 = model.motion.codes(x0)
         w = velocity_coefficients(model.motion.params(), 0.4, z0, model.motion.cfg)
         assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)
+
+
+@pytest.mark.parametrize("extra", [["model.scheme=adf-step"], ["model.scheme=adf-step", "model.ablation=no-pds"],
+                                   ["model.scheme=adf-step", "train.lambda_carry=1.0", "train.carry_points=16"],
+                                   ["physics.placement=gaussians"], ["train.motion_only=true"]])
+def test_schemes_and_options_train_and_reload(tiny_scene, tmp_path, extra):
+    cfg = load_config(None, TINY + extra)
+    model = loop.train(cfg, tiny_scene, tmp_path, progress=False)
+    reloaded, _ = load_model(tmp_path)
+    frame = tiny_scene.extrapolation[0]
+    with torch.no_grad():
+        a = model.render(frame.camera, frame.time, tiny_scene.background)[0]
+        b = reloaded.render(frame.camera, frame.time, tiny_scene.background)[0]
+    assert torch.isfinite(a).all() and torch.equal(a, b)
+
+
+def test_adf_step_scheme_renders_the_adf_inside_the_window_and_the_velocity_beyond(tiny_scene):
+    # VG-CARRY: inside the window (offset 0) the ADF's state; past max_time the ADF's state at
+    # max_time moved by the velocity, whose last layer is non-zero after this perturbation.
+    cfg, model = _model(tiny_scene, ["model.scheme=adf-step"])
+    with torch.no_grad():
+        for p in model.motion.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    motion = model.motion
+    x0, q0, s0 = model.gaussians.means, torch.nn.functional.normalize(model.gaussians.quats, dim=1), model.gaussians.scales
+    z = motion.codes(x0)
+    with torch.no_grad():
+        inside = model.state_at(0.5)[0]
+        dx, _, _ = motion.adf_residual(x0, 0.5, z)
+        torch.testing.assert_close(inside, x0 + dx)
+        beyond = model.state_at(0.9)[0]
+        dx_end, dq_end, ds_end = motion.adf_residual(x0, model.max_time, z)
+        from velogauss_fast.motion.deform import compose_state
+
+        start = compose_state(x0, q0, s0, dx_end, dq_end, ds_end)
+        want = motion.base_state_from(*start, z, model.max_time, 0.9)[0]
+        torch.testing.assert_close(beyond, want)
+        assert (beyond - (x0 + dx_end)).norm(dim=1).max() > 1e-4  # the velocity moved them
+        # A training offset starts the step one frame away.
+        stepped = model.state_at(0.5, offset=0.05)[0]
+        dx_start, dq_start, ds_start = motion.adf_residual(x0, 0.45, z)
+        start = compose_state(x0, q0, s0, dx_start, dq_start, ds_start)
+        torch.testing.assert_close(stepped, motion.base_state_from(*start, z, 0.45, 0.5)[0])
+
+
+def test_collocation_near_points_stays_within_the_jitter():
+    from velogauss.train.sampling import collocation_near
+
+    points = torch.tensor([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]])
+    x = collocation_near(points, 500, 0.01, np.random.default_rng(0))
+    nearest = torch.cdist(x, points).min(dim=1).values
+    assert x.shape == (500, 3) and nearest.max() < 0.06  # 6 sigma of a 3D normal, 500 draws
+    assert (torch.cdist(x, points).argmin(dim=1) == 0).any() and (torch.cdist(x, points).argmin(dim=1) == 1).any()

@@ -50,10 +50,15 @@ VARIANTS = {
     "a": [],
     "b": ["model.scheme=adf-step"],
     "a-no-gpc": ["model.ablation=no-gpc"],
+    "a-no-adf": ["model.ablation=no-adf"],
     "b-no-gpc": ["model.scheme=adf-step", "model.ablation=no-gpc"],
     "a-phys10": ["physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
     "b-phys10": ["model.scheme=adf-step", "physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
     "deform-only": ["model.ablation=deform-only"],
+    "b-carry": ["model.scheme=adf-step", "train.lambda_carry=1.0"],
+    "b-carry-near": ["model.scheme=adf-step", "train.lambda_carry=1.0", "physics.placement=gaussians"],
+    "a-near": ["physics.placement=gaussians"],
+    "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
 }
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
 # The representational fit: points on the moving surfaces (a seed other than the
@@ -213,7 +218,18 @@ def main(argv=None):
                         record = run_one(name, level, variant, seed, args.cache, args.set)
                         print(json.dumps({k: record.get(k) for k in ("scene", "level", "variant", "seed",
                                                                       *(c[0] for c in COLUMNS))}), flush=True)
-    print(table(load_records(args.cache)))
+    records = [r for r in load_records(args.cache) if _selected(r, args)]
+    print(table(records))
+
+
+def _selected(record, args):
+    """Whether a cached record is in the --scenes / --levels / --variants / --seeds selection
+    of a `table` command ("all" selects everything)."""
+    if args.command == "run":
+        return True
+    return all(value == "all" or str(record[key]) in value.split(",")
+               for key, value in (("scene", args.scenes), ("level", args.levels), ("variant", args.variants),
+                                  ("seed", args.seeds)))
 
 
 if __name__ == "__main__":

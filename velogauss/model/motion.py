@@ -17,7 +17,7 @@ from torch import nn
 from torch.func import jvp
 
 from velogauss.config import INTEGRATORS
-from velogauss_fast.motion.carry import carried_state
+from velogauss_fast.motion.carry import carried_state, carry_loss
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.deform import adf_residual, compose_state
 from velogauss_fast.motion.integrate import integrate
@@ -106,6 +106,11 @@ class MotionModel(nn.Module):
         xs = xa.detach()
         xv = integrate(lambda y, tau: self._mlp_velocity(y, tau), xs, t_start, t, self.step, self.integrator)
         return xa + (xv - xs), qa, sa
+
+    def carry_loss(self, x0, q0, s0, z, t_a, t):
+        """VG-LOSS-CARRY: mean squared gap between the affine velocity's step t_a -> t from the
+        ADF's state and the ADF's position at t (0-d tensor)."""
+        return carry_loss(self.params(), x0, q0, s0, z, t_a, t, self.step, self.integrator, self.cfg)
 
     def adf_residual(self, x0, t, z):
         """(dx, dq, ds) of the auxiliary deformation field (VG-ADF)."""

@@ -31,7 +31,7 @@ from velogauss.model.dynamic import render_gaussians
 from velogauss.train.checkpoint import load_checkpoint, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.optim import make_optimizer, set_learning_rates
-from velogauss.train.sampling import FrameSampler, camera_extent, collocation_points
+from velogauss.train.sampling import FrameSampler, camera_extent, collocation_near, collocation_points
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.losses import photometric_loss, physics_loss
 from velogauss_fast.metrics import psnr
@@ -145,12 +145,15 @@ class _Loop:
             self.freeze_motion(it)
         means, quats, scales, base = model.state_at(frame.time, self.carry_offset(it))
         image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
-        meta["mean2d"].retain_grad()
+        if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
+            meta["mean2d"].retain_grad()
         loss = photometric_loss(image, gt)
         if motion_on and model.has_velocity and model.motion.use_adf:
             loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
         if motion_on and self.switches.gpc and model.has_velocity:
             loss = loss + self.physics_loss(it)
+        if motion_on and cfg.train.lambda_carry > 0 and model.scheme == "adf-step" and model.motion.pds:
+            loss = loss + cfg.train.lambda_carry * self.carry_loss(it)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad = meta["mean2d"].grad
@@ -187,13 +190,38 @@ class _Loop:
             return 0.0
         return m.carry_offset * (1.0 if self.rng.random() < 0.5 else -1.0)
 
+    def carry_loss(self, it):
+        """VG-LOSS-CARRY on up to `carry_points` moving Gaussians, between two times of the
+        window opened so far (the ADF has seen no frame after it): t uniform in it, t_a up
+        to `carry_horizon` away on either side."""
+        t_cfg, g, model = self.cfg.train, self.model.gaussians, self.model
+        window = self.sampler.window(it)
+        t = float(self.rng.uniform(0.0, window))
+        t_a = float(np.clip(t + self.rng.uniform(-t_cfg.carry_horizon, t_cfg.carry_horizon), 0.0, window))
+        idx = torch.nonzero(model.moving).squeeze(1)
+        if len(idx) > t_cfg.carry_points:
+            idx = idx[torch.as_tensor(self.rng.choice(len(idx), t_cfg.carry_points, replace=False), device=idx.device)]
+        x0, q0, s0 = (v.detach().index_select(0, idx) for v in (g.means, g.quats, g.scales))
+        z = model.motion.codes(x0)
+        return model.motion.carry_loss(x0, q0, s0, z, t_a, t)
+
     def physics_loss(self, it):
         """Ramped VG-LOSS-PHYS on fresh collocation points."""
         p = self.cfg.physics
         ramp = min(1.0, (it - self.cfg.train.warmup + 1) / max(1, p.ramp))
         x, t = collocation_points(self.data.bounds, p.bounds_margin, p.n_points, self.rng, torch.float32, self.device)
+        if p.placement == "gaussians" and bool(self.model.moving.any()):  # else the box: nothing to be near
+            x = self.collocation_near_gaussians(t)
         r, div = self.model.motion.residuals(x, t, divergence=self.profile.divergence)
         return physics_loss(r, div, ramp * p.lambda_transport, ramp * p.lambda_div)
+
+    def collocation_near_gaussians(self, t):
+        """Collocation points near the moving Gaussians' means at time t (placement "gaussians")."""
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in self.data.bounds)
+        with torch.no_grad():
+            means = self.model.state_at(t)[0][self.model.moving]
+        return collocation_near(means, self.cfg.physics.n_points,
+                                self.cfg.physics.jitter * float(np.linalg.norm(hi - lo)), self.rng)
 
     def maintain(self, done):
         """Density control, opacity resets and static detection due after `done` iterations."""

@@ -26,3 +26,13 @@ def carried_state(params, x0, q0, s0, z, t, t_start, h, method, cfg):
     conjugate = torch.tensor([1.0, -1.0, -1.0, -1.0], dtype=qs.dtype, device=qs.device)
     turn = quat_multiply(qv, qs * conjugate)
     return xa + (xv - xs), normalize_quat(quat_multiply(turn, qa)), sa * (sv / ss)
+
+
+def carry_loss(params, x0, q0, s0, z, t_a, t, h, method, cfg):
+    """mean_i |base_state(sg(adf_state(t_a)), t_a -> t)_x - sg(adf_state(t)_x)|^2 (VG-LOSS-CARRY);
+    see `velogauss_ref.motion.carry.carry_loss`. Returns a 0-d tensor."""
+    with torch.no_grad():
+        xa, qa, sa = adf_state(params, x0, q0, s0, z, t_a, cfg)
+        target = adf_state(params, x0, q0, s0, z, t, cfg)[0]
+    xv = base_state(params, xa, qa, sa, z, t, h, method, cfg, t0=t_a)[0]
+    return ((xv - target) ** 2).sum() / max(x0.shape[0], 1)

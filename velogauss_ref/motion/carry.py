@@ -53,3 +53,18 @@ def carried_state(params, x0, q0, s0, z, t, t_start, h, method, cfg):
     xv, qv, sv = base_state(params, xs, qs, ss, z, t, h, method, cfg, t0=t_start)
     turn = quat_multiply(qv, qs * _CONJUGATE)
     return xa + (xv - xs), normalize_quat(quat_multiply(turn, qa)), sa * (sv / ss)
+
+
+def carry_loss(params, x0, q0, s0, z, t_a, t, h, method, cfg):
+    """Mean squared distance between the velocity's step and the ADF's path (VG-LOSS-CARRY).
+
+    x0 (N, 3), q0 (N, 4), s0 (N, 3) canonical, z (N, L); scalars t_a, t in the observed
+    window -> scalar: mean_i |x_v,i - sg(x_a(t))_i|^2 with x_v = base_state(sg(adf_state(t_a)),
+    t_a -> t) (VG-STEP) and x_a(t) the ADF's position at t (VG-ADF-STATE). Only the velocity
+    (and the code through it) learns: the ADF's states are constants. N = 0 gives 0.
+    """
+    n = np.shape(x0)[0]
+    xa, qa, sa = (getval(v) for v in adf_state(params, x0, q0, s0, z, t_a, cfg))
+    target = getval(adf_state(params, x0, q0, s0, z, t, cfg)[0])
+    xv = base_state(params, xa, qa, sa, z, t, h, method, cfg, t0=t_a)[0]
+    return np.sum((xv - target) ** 2) / max(n, 1)

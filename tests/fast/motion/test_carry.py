@@ -49,3 +49,11 @@ def test_carried_state_reference_vs_fast(device, t, t_start, masked):
     cfg = small_cfg(mask=RIGID_MASK if masked else None)
     args = (random_params(5, cfg), *_state(np.random.default_rng(5), 4, cfg), t, t_start, 0.05, "rk2", cfg)
     check_agreement(ref.carried_state, fast.carried_state, args, diff=(0, 1, 2, 3, 4), device=device, seed=6)
+
+
+@pytest.mark.spec("VG-LOSS-CARRY")
+@pytest.mark.parametrize("t_a, t", [(0.1, 0.35), (0.6, 0.3), (0.4, 0.4)])
+def test_carry_loss_reference_vs_fast(device, t_a, t):
+    cfg = small_cfg(mask=RIGID_MASK)
+    args = (random_params(7, cfg), *_state(np.random.default_rng(7), 4, cfg), t_a, t, 0.05, "rk2", cfg)
+    check_agreement(ref.carry_loss, fast.carry_loss, args, diff=(0, 1, 2, 3, 4), device=device, seed=8)

@@ -126,3 +126,27 @@ def test_gradients_split_between_the_adf_and_the_velocity():
     for got, want in zip(grad(carried_x("time"))(params["time"]), step_only):
         np.testing.assert_allclose(got[0], want[0], rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(got[1], want[1], rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.spec("VG-LOSS-CARRY")
+def test_carry_loss_is_the_squared_gap_and_trains_only_the_velocity():
+    from velogauss_ref.motion.carry import carry_loss
+
+    cfg = small_cfg()
+    params = random_params(12, cfg)
+    x0, q0, s0, z = _state(np.random.default_rng(12), 5, cfg)
+    start = adf_state(params, x0, q0, s0, z, 0.2, cfg)
+    xv = base_state(params, *start, z, 0.5, 0.05, "rk2", cfg, t0=0.2)[0]
+    gap = xv - adf_state(params, x0, q0, s0, z, 0.5, cfg)[0]
+    assert carry_loss(params, x0, q0, s0, z, 0.2, 0.5, 0.05, "rk2", cfg) == pytest.approx(np.mean(np.sum(gap**2, 1)),
+                                                                                           rel=1e-14)
+    # The ADF's states are constants: no gradient reaches the ADF weights.
+    g = grad(lambda adf: carry_loss({**params, "adf": adf}, x0, q0, s0, z, 0.2, 0.5, 0.05, "rk2", cfg))(params["adf"])
+    assert all(np.all(W == 0) and np.all(b == 0) for W, b in g)
+    # The velocity's do, and the gradient w.r.t. the time network matches finite differences.
+    theta, unflatten = flat_params(params["time"])
+
+    def f(theta):
+        return carry_loss({**params, "time": unflatten(theta)}, x0, q0, s0, z, 0.2, 0.5, 0.05, "rk2", cfg)
+
+    check_grads_fd(f, (theta,), (0,), np.random.default_rng(13), step=FD_STEP)
