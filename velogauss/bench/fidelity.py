@@ -22,7 +22,8 @@ tables can be rebuilt (`table`) without retraining. Results go to benchmarks/FID
 Regenerate (one core: export OMP_NUM_THREADS=1):
   python -m velogauss.bench.fidelity run --scenes toss,stretch --seeds 0 --levels fit,fit-all,opt,full --variants a
   python -m velogauss.bench.fidelity run --scenes toss --seeds 0,1 --levels full --variants a,b
-  python -m velogauss.bench.fidelity table
+  python -m velogauss.bench.fidelity table --scenes all --levels all --variants all --seeds all
+(`rescore` recomputes the motion scores of the selected trained runs from their checkpoints.)
 """
 
 import argparse
@@ -172,6 +173,23 @@ def run_one(name, level, variant, seed, cache, extra=()):
     return record
 
 
+def rescore(record, cache):
+    """The record with its motion scores recomputed from the run's final checkpoint (after a
+    change of the metric, e.g. EVAL_VELOCITY_FLOOR); fit levels keep no checkpoint and are
+    returned unchanged."""
+    from velogauss.scenes import load_ground_truth
+    from velogauss.train.checkpoint import load_model
+
+    if record["level"] not in ("opt", "full"):
+        return record
+    tag = f"{record['scene']}-{record['level']}-{record['variant']}-s{record['seed']}"
+    model, cfg = load_model(Path(cache) / "runs" / tag)
+    scene = load_ground_truth(scene_dir(cache, record["scene"]))
+    updated = {**record, **motion_scores(model, scene, cfg.data.max_time)}
+    write_text(Path(cache) / "results" / f"{tag}.json", json.dumps(updated, indent=1))
+    return updated
+
+
 COLUMNS = [("vel_observed", "vel. err obs", "{:.3f}"), ("vel_future", "vel. err fut", "{:.3f}"),
            ("traj_ratio_observed", "traj/still obs", "{:.3f}"), ("traj_ratio_future", "traj/still fut", "{:.3f}"),
            ("interp_psnr", "interp dB", "{:.2f}"), ("extrap_psnr", "extrap dB", "{:.2f}"),
@@ -201,7 +219,7 @@ def load_records(cache):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m velogauss.bench.fidelity", description=__doc__.split("\n")[0])
-    parser.add_argument("command", choices=("run", "table"))
+    parser.add_argument("command", choices=("run", "table", "rescore"))
     parser.add_argument("--scenes", default="toss")
     parser.add_argument("--seeds", default="0")
     parser.add_argument("--levels", default="full")
@@ -221,6 +239,8 @@ def main(argv=None):
                         print(json.dumps({k: record.get(k) for k in ("scene", "level", "variant", "seed",
                                                                       *(c[0] for c in COLUMNS))}), flush=True)
     records = [r for r in load_records(args.cache) if _selected(r, args)]
+    if args.command == "rescore":
+        records = [rescore(r, args.cache) for r in records]
     print(table(records))
 
 
