@@ -113,3 +113,10 @@ TIME_HORIZON = 100.0
 # unchanged, while a far time holds at most this many stages' coefficients in memory
 # (256 x 12 x N floats: 120 MB for 10k Gaussians) instead of all of them.
 STAGE_CHUNK = 256
+# The velocity metric's relative error is undefined at a time whose true velocity vanishes.
+# A periodic motion's velocity vanishes only up to rounding (pulse: cos(3π/2) ≈ -1.8e-16,
+# relative to an O(1) velocity), and dividing by that noise gave relative errors of 1e14.
+# Below this fraction of the largest true velocity norm over the evaluation times, a time
+# has no relative error (None), as an exactly-zero one already had. Real reversal points
+# sit 10 orders of magnitude above rounding in no catalogue scene, so 1e-6 separates them.
+EVAL_VELOCITY_FLOOR = 1e-6
