@@ -49,7 +49,6 @@ Scheme = Literal["integrate", "adf-step"]
 # (VG-ADF-COMPOSE), the paper's scheme. "adf-step" (b): the ADF's own state at a start time
 # carried to t by the velocity (VG-CARRY), the authors' released code. Defined here, not in
 # velogauss.model.spec, because the config (which velogauss.model imports) types a key with it.
-SCHEMES: tuple[str, ...] = get_args(Scheme)
 
 VelocityKind = Literal["affine", "mlp"]
 # How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP

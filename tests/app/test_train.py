@@ -266,6 +266,7 @@ def test_adf_step_scheme_renders_the_adf_inside_the_window_and_the_velocity_beyo
     cfg, model = _model(tiny_scene, ["model.scheme=adf-step"])
     spec = model.spec
     assert spec.scheme == "adf-step" and spec.carry_until == cfg.data.max_time and spec.carry_loss
+    assert not spec.adf_loss  # x = x* under scheme (b): no displacement to penalise
     with torch.no_grad():
         for p in model.motion.parameters():
             p.add_(0.05 * torch.randn_like(p))

@@ -13,19 +13,17 @@ only this spec; no other layer re-derives which pieces run.
 | no-gpc       | affine (PDS)    | yes | no                   |
 | deform-only  | none            | yes | no  (DefGS-style)    |
 
-Adding a training scheme: one more value of `Scheme` (velogauss_core.motion), resolved here, and one branch in
-`velogauss.model.motion.gaussians_at` (ARCHITECTURE.md).
+Adding a training scheme: one more value of `Scheme` (velogauss_core.motion), resolved
+here, and one branch in `velogauss.model.motion.gaussians_at` (ARCHITECTURE.md).
 """
 
 import dataclasses
 from dataclasses import dataclass
 
 from velogauss.model.profile import MotionProfile
-from velogauss_core.motion import SCHEMES, Integrator, MotionConfig, Scheme, VelocityKind
-
-# `Scheme` ("integrate" (a), "adf-step" (b)) and `SCHEMES` are defined once in
-# velogauss_core.motion, where the config (which this package imports) can type its key.
-__all__ = ["ABLATION_SWITCHES", "SCHEMES", "MotionSpec", "Scheme", "resolve_motion_spec"]
+# `Scheme` ("integrate" (a), "adf-step" (b)) is defined once in velogauss_core.motion, where
+# the config (which this package imports) can type its key.
+from velogauss_core.motion import Integrator, MotionConfig, Scheme, VelocityKind
 
 
 @dataclass(frozen=True)
@@ -60,7 +58,8 @@ class MotionSpec:
     integrator, step: VG-INTEG's method and largest step in normalised time;
     adf: the ADF residual is built and applied (VG-ADF);
     adf_clamp_time: the ADF's input time is min(t, this), or None (evaluated at every t);
-    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a velocity);
+    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a
+      velocity, scheme "integrate"; under "adf-step" x = x*, the penalty would be 0);
     physics_loss: the VG-LOSS-PHYS transport residual on collocation points is on (GPC);
     divergence: the VG-DIV term of the physics loss is on (incompressible motion);
     carry_until: scheme "adf-step": the end of the ADF's window (max_time), where beyond it
@@ -119,7 +118,7 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
         step=float(model_cfg.step),
         adf=adf,
         adf_clamp_time=float(max_time) if clamp else None,
-        adf_loss=adf and velocity is not None,
+        adf_loss=adf and velocity is not None and not carry,  # scheme (b) renders the ADF's state: x = x*
         physics_loss=switches.gpc and velocity is not None,
         divergence=switches.gpc and velocity is not None and bool(profile.divergence),
         carry_until=float(max_time) if carry else None,
