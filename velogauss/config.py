@@ -10,8 +10,9 @@ came from (the file, `--set` or the flag). `to_toml(cfg)` writes a config back (
 `velogauss train` saves it as `RUN_DIR/config.toml`, which is what `eval`, `render`,
 `export` and `--resume` read again.
 
-The lists of choices are defined once, here, as `Literal` types (`Ablation`, `Integrator`,
-`Effect`); the command line shows them and validation enforces them.
+The lists of choices are defined once, as `Literal` types (`Ablation`, `Integrator`,
+`Effect`, `Scheme` in velogauss_core.motion; `Placement` here); the command line shows them
+and validation enforces them.
 """
 
 import dataclasses
@@ -23,7 +24,7 @@ import tomli_w
 from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
-from velogauss_core.motion import ABLATIONS, EFFECTS, INTEGRATORS, Ablation, Effect, Integrator, MotionConfig
+from velogauss_core.motion import ABLATIONS, EFFECTS, INTEGRATORS, Ablation, Effect, Integrator, MotionConfig, Scheme
 
 
 def _int(**bounds):
@@ -45,6 +46,7 @@ Rate0 = _float(ge=0.0)
 Count = _int(ge=1)
 Every = _int(ge=0)  # an interval in iterations; 0 disables
 _STRICT = ConfigDict(extra="forbid")
+Placement = Literal["box", "gaussians"]  # where VG-LOSS-PHYS's collocation points are drawn
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -87,6 +89,13 @@ class ModelConfig:
     # at max_time instead of evaluating sinusoids of an unseen t (ablation deform-only,
     # a DefGS-style model, evaluates the network at every t, as DefGS does).
     adf_clamp_time: Flag = True
+    # How x(t) comes from the velocity and the ADF (spec/motion.md): "integrate" (a) from the
+    # canonical state at t = 0, "adf-step" (b) the ADF's state carried by the velocity
+    # (VG-CARRY). (a) stays the default: it extrapolated best (benchmarks/FIDELITY.md).
+    scheme: Scheme = "integrate"
+    # Scheme "adf-step": |t - t_start| of VG-CARRY in training (one frame of 21, the authors'
+    # step); at most the whole normalised window, 0 trains the ADF alone inside it.
+    carry_offset: Unit = 0.05
     init_points: Count = 5000  # random initial Gaussians when the scene has no points3d.ply
     init_opacity: _float(gt=0.0, lt=1.0) = 0.1  # a logit is taken
 
@@ -119,6 +128,16 @@ class TrainConfig:
     # Iteration at which the ADF starts learning; -1: once the curriculum has opened the
     # whole window (warmup + curriculum), or with the motion for deform-only.
     adf_start: _int(ge=-1) = -1
+    # Scheme "adf-step": weight of VG-LOSS-CARRY (the velocity fitted to the ADF's paths);
+    # 0 disables it, a negative one would reward the gap.
+    lambda_carry: _float(ge=0.0) = 0.0
+    # VG-LOSS-CARRY: largest |t - t_a| drawn, in normalised time (a step of 0 teaches nothing,
+    # and the window is at most [0, 1]).
+    carry_horizon: _float(gt=0.0, le=1.0) = 0.25
+    carry_points: Count = 2048  # VG-LOSS-CARRY: moving Gaussians drawn per iteration
+    # After the warm-up only the motion trains (the error budget's optimisation floor,
+    # benchmarks/FIDELITY.md).
+    motion_only: Flag = False
     eval_every: Every = 500  # PSNR on the interpolation split -> log.jsonl
     checkpoint_every: Every = 500  # 0: only at the end (and on Ctrl-C)
 
@@ -136,6 +155,12 @@ class PhysicsConfig:
     ramp: _int(ge=0) = 1200  # iterations over which both weights rise linearly from 0
     n_points: Count = 1024  # collocation points per iteration, one random time each
     bounds_margin: _float(ge=0.0) = 0.1  # the box grows by this fraction of its size on each side
+    # Where the collocation points lie: "box" uniform in the grown box, "gaussians" near the
+    # moving Gaussians at the collocation time (where the residual binds the particles).
+    placement: Placement = "box"
+    # Placement "gaussians": standard deviation of the normal offset, as a fraction of the box
+    # diagonal (0: exactly at the means).
+    jitter: _float(ge=0.0) = 0.02
 
 
 @dataclass(frozen=True, config=_STRICT)

@@ -19,8 +19,9 @@ spaced times in [0, 1]; those `> max_time` are the future):
   move (static motion) are dropped. At each time t the points are carried to their true
   positions `x = position(x0, t)` and the model's velocity there is compared with the true
   one: `relative L2 error(t) = ‖v(x, t) − v_gt(x, t)‖ / ‖v_gt(x, t)‖`, norms over all
-  points and components (Frobenius); a time where `v_gt` is identically zero has no
-  relative error (None) and is left out of the means. Also reported: the mean per-point
+  points and components (Frobenius); a time where `‖v_gt‖` is at most `EVAL_VELOCITY_FLOOR`
+  times its largest value over the times (zero, or a periodic motion's reversal, zero up to
+  rounding) has no relative error (None) and is left out of the means. Also reported: the mean per-point
   error `mean_i |v(x_i, t) − v_gt(x_i, t)|` (world units per unit time).
   Two velocities are scored: the particle velocity `particle_velocity(x0, x, t)` (the code
   frozen at the material point's start, what moves the Gaussians; keys `relative_l2`,
@@ -51,7 +52,7 @@ from tqdm.auto import tqdm
 from velogauss.io_utils import to_numpy
 from velogauss.scenes.motions import StaticMotion
 from velogauss_fast import metrics
-from velogauss_core.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN
+from velogauss_core.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN, EVAL_VELOCITY_FLOOR
 from velogauss_core.lpips_nets import min_image_size, weights_file
 
 IMAGE_METRICS = ("psnr", "ssim", "lpips_alex", "lpips_vgg")
@@ -175,7 +176,9 @@ def velocity_error(model, scene, max_time, times=MOTION_EVAL_TIMES, points=None)
     """
     x0 = moving_surface_points(scene) if points is None else np.asarray(points, dtype=np.float64)
     rows = []
-    for t in times:
+    gt_norms = [np.linalg.norm(scene.velocity(scene.position(x0, t, margin=np.inf), t, margin=np.inf)) for t in times]
+    floor = EVAL_VELOCITY_FLOOR * max(gt_norms, default=0.0)
+    for t, gt_norm in zip(times, gt_norms):
         if not model.has_velocity:
             rows.append({"time": float(t), "relative_l2": None, "mean_abs": None, "field_relative_l2": None})
             continue
@@ -183,7 +186,7 @@ def velocity_error(model, scene, max_time, times=MOTION_EVAL_TIMES, points=None)
         v_gt = scene.velocity(x, t, margin=np.inf)
         v = query(model.particle_velocity, t, x, start=x0)
         v_field = query(model.velocity_at, t, x)
-        gt_norm = np.linalg.norm(v_gt)
+        gt_norm = gt_norm if gt_norm > floor else 0.0
         rows.append({
             "time": float(t),
             "relative_l2": float(np.linalg.norm(v - v_gt) / gt_norm) if gt_norm > 0 else None,

@@ -99,6 +99,13 @@ EXPORT_OPACITY_CLAMP = 1e-7
 # bodies are closer than this (multi's cube rests on the ground), a Gaussian goes to the
 # nearer one (AnalyticScene.body_index), so membership stays well defined.
 EVAL_SURFACE_MARGIN = 0.05
+# The velocity metric's relative error is undefined at a time whose true velocity vanishes.
+# A periodic motion's velocity vanishes only up to rounding (pulse: cos(3π/2) ≈ -1.8e-16,
+# relative to an O(1) velocity), and dividing by that noise gave relative errors of 1e14.
+# Below this fraction of the largest true velocity norm over the evaluation times, a time
+# has no relative error (None), as an exactly-zero one already had. Real reversal points
+# sit 10 orders of magnitude above rounding in no catalogue scene, so 1e-6 separates them.
+EVAL_VELOCITY_FLOOR = 1e-6
 
 # --- Inference at arbitrary times (velogauss export/render/view) ---------------------------
 # |t| beyond this is refused. The model has only seen t in [0, max_time] (normalised, so

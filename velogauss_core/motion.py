@@ -11,6 +11,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from velogauss_core.checks import check_scalar
 from velogauss_core.constants import ACC_POLY_DEGREE
 
 # Number of affine basis velocity fields, the columns of Phi (VG-BASIS).
@@ -40,6 +41,14 @@ INTEGRATORS: tuple[str, ...] = get_args(Integrator)
 Ablation = Literal["full", "no-pds", "no-adf", "no-gpc", "deform-only"]
 # The paper's ablations (Table "ablation"): which of PDS, ADF and GPC a model keeps.
 ABLATIONS: tuple[str, ...] = get_args(Ablation)
+
+Scheme = Literal["integrate", "adf-step"]
+# How the Gaussians' state at t comes from the velocity and the ADF (spec/motion.md;
+# `velogauss.model.motion.gaussians_at` has one branch per value). "integrate" (a):
+# integrate from the canonical state at t = 0 (VG-TRAJ), then add the ADF residual
+# (VG-ADF-COMPOSE), the paper's scheme. "adf-step" (b): the ADF's own state at a start time
+# carried to t by the velocity (VG-CARRY), the authors' released code. Defined here, not in
+# velogauss.model.spec, because the config (which velogauss.model imports) types a key with it.
 
 VelocityKind = Literal["affine", "mlp"]
 # How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP
@@ -126,6 +135,17 @@ def init_motion_params(rng, cfg):
         "acc": np.zeros((ACC_POLY_DEGREE + 1, K, N_BASIS)),
         "adf": mlp("adf", zero_last=True),
     }
+
+
+def carry_start(t, offset, max_time):
+    """Start time of VG-CARRY (spec/motion.md): clamp(t - offset, 0, max_time) inside the
+    window (t <= max_time), max_time beyond it. offset: the signed one-step offset drawn in
+    training, 0 in evaluation. Plain floats: the reference and the model share it."""
+    check_scalar("t", t)
+    check_scalar("offset", offset)
+    if t > max_time:
+        return float(max_time)
+    return float(min(max(t - offset, 0.0), max_time))
 
 
 def mlp_layers(rng, d_in, hidden, depth, d_out, zero_last=False):

@@ -154,6 +154,17 @@ def test_velocity_relative_error_of_scaled_fields(scale, expected):
     assert len([r for r in error["per_time"] if r["time"] > 0.75]) == 3  # 0.8, 0.9, 1.0
 
 
+def test_a_reversal_has_no_relative_error_instead_of_dividing_by_rounding():
+    # pulse's strain rate is cos(3 pi t): at t = 0.5 it is zero up to rounding (~1e-16), and
+    # a model off by a zero velocity of 1e-3 must not score 1e13 there.
+    scene = SCENES["pulse"]()
+    error = evaluate.velocity_error(VelocityModel(scene, scale=0.5), scene, max_time=0.75)
+    at_half = [r for r in error["per_time"] if r["time"] == pytest.approx(0.5)][0]
+    assert at_half["relative_l2"] is None and at_half["mean_abs"] is not None
+    assert error["observed"]["relative_l2"] == pytest.approx(0.5, abs=1e-6)
+    assert sum(r["relative_l2"] is None for r in error["per_time"]) == 1
+
+
 def test_particle_velocity_and_eulerian_field_are_scored_apart():
     scene = SCENES["toss"]()
     error = evaluate.velocity_error(VelocityModel(scene, scale=1.0, field_scale=0.0), scene, max_time=0.75)

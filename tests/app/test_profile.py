@@ -5,7 +5,7 @@ import pytest
 
 from velogauss.model.profile import resolve_profile
 from velogauss.scenes import SCENES
-from velogauss.scenes.motions import LinearFlowMotion, RigidMotion, StaticMotion
+from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
 
 T, R, S, H = range(0, 3), range(3, 6), range(6, 9), range(9, 12)
 
@@ -64,7 +64,7 @@ def test_catalog_motion_lies_in_the_selected_columns(name, rng):
     for body in scene.bodies:
         if isinstance(body.motion, StaticMotion):
             continue
-        assert isinstance(body.motion, (RigidMotion, LinearFlowMotion))
+        assert isinstance(body.motion, (RigidMotion, LinearFlowMotion, PeriodicFlowMotion))
         for t in (0.0, 0.5, 0.9):
             x = rng.uniform(-1, 1, (40, 3))
             v = body.motion.velocity(x, t)

@@ -8,7 +8,7 @@ import pytest
 from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.scenes import DEFAULT_SCENE, EFFECTS, SCENES, load_ground_truth, make_scene
 from velogauss.scenes.bodies import Body, Texture
-from velogauss.scenes.motions import LinearFlowMotion, RigidMotion, StaticMotion
+from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
 from velogauss.scenes.raycast import cast_rays, intersect_primitive, shade, world_normal
 from velogauss.scenes.scene import AnalyticScene
 
@@ -148,8 +148,9 @@ def test_position_derivative_equals_eulerian_velocity(name, rng):
     [
         LinearFlowMotion((0.3, -0.2, 0.5), [[0.2, 0.5, -0.1], [0.0, -0.3, 0.4], [0.6, 0.1, 0.1]]),
         RigidMotion((0.4, 0.1, -0.3), omega=(1.0, -2.0, 0.5), velocity=(0.3, 0.2, 1.0), gravity=(0.1, 0.0, -3.0)),
+        PeriodicFlowMotion((0.3, -0.2, 0.5), [[0.2, 0.5, -0.1], [0.0, -0.3, 0.4], [0.6, 0.1, 0.1]], omega=4.0),
     ],
-    ids=["linear_flow", "rigid"],
+    ids=["linear_flow", "rigid", "periodic_flow"],
 )
 def test_motions_about_off_origin_centres(motion, rng):
     # The catalog's flows are centred at the origin; a centre elsewhere exercises every b(t) term.

@@ -22,6 +22,8 @@ from velogauss.train.sampling import FrameSampler
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss.visualize import render_run
 from velogauss_fast.motion.code import physics_code
+from velogauss_fast.motion.deform import adf_residual, compose_state
+from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.motion.coefficients import coefficients as velocity_coefficients
 from velogauss_fast.motion.velocity import velocity as affine_velocity
 
@@ -242,3 +244,69 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
         params, cfg_m = model.motion.params(), model.spec.config
         w = velocity_coefficients(params, 0.4, physics_code(params, x0, cfg_m), cfg_m)
         assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)
+
+
+@pytest.mark.parametrize("extra", [["model.scheme=adf-step"], ["model.scheme=adf-step", "model.ablation=no-pds"],
+                                   ["model.scheme=adf-step", "train.lambda_carry=1.0", "train.carry_points=16"],
+                                   ["physics.placement=gaussians"], ["train.motion_only=true"]])
+def test_schemes_and_options_train_and_reload(tiny_scene, tmp_path, extra):
+    cfg = load_config(None, TINY + extra)
+    model = loop.train(cfg, tiny_scene, tmp_path, progress=False)
+    reloaded, _ = load_model(tmp_path)
+    frame = tiny_scene.extrapolation[0]
+    with torch.no_grad():
+        a = model.render(frame.camera, frame.time, tiny_scene.background)[0]
+        b = reloaded.render(frame.camera, frame.time, tiny_scene.background)[0]
+    assert torch.isfinite(a).all() and torch.equal(a, b)
+
+
+def test_adf_step_scheme_renders_the_adf_inside_the_window_and_the_velocity_beyond(tiny_scene):
+    # VG-CARRY: inside the window (offset 0) the ADF's state; past max_time the ADF's state at
+    # max_time moved by the velocity, whose last layer is non-zero after this perturbation.
+    cfg, model = _model(tiny_scene, ["model.scheme=adf-step"])
+    spec = model.spec
+    assert spec.scheme == "adf-step" and spec.carry_until == cfg.data.max_time and spec.carry_loss
+    assert not spec.adf_loss  # x = x* under scheme (b): no displacement to penalise
+    with torch.no_grad():
+        for p in model.motion.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    params = model.motion.params()
+    x0, q0, s0 = model.gaussians.means, torch.nn.functional.normalize(model.gaussians.quats, dim=1), model.gaussians.scales
+    z = physics_code(params, x0, spec.config)
+
+    def adf_state(t):
+        return compose_state(x0, q0, s0, *adf_residual(params, x0, t, z, spec.config))
+
+    def step(state, t0, t):
+        return base_state(params, *state, z, t, spec.step, spec.integrator, spec.config, t0=t0)
+
+    with torch.no_grad():
+        inside = model.state_at(0.5)[0]
+        torch.testing.assert_close(inside, adf_state(0.5)[0])
+        beyond = model.state_at(0.9)[0]
+        torch.testing.assert_close(beyond, step(adf_state(spec.carry_until), spec.carry_until, 0.9)[0])
+        assert (beyond - adf_state(spec.carry_until)[0]).norm(dim=1).max() > 1e-4  # the velocity moved them
+        # A training offset starts the step one frame away.
+        stepped = model.state_at(0.5, offset=0.05)[0]
+        torch.testing.assert_close(stepped, step(adf_state(0.45), 0.45, 0.5)[0])
+
+
+def test_adf_step_needs_a_velocity_and_an_adf(tiny_scene):
+    # Without an ADF (no-adf) or a velocity (deform-only) there is nothing to carry: the scheme
+    # resolves to "integrate", and so does training before the ADF starts.
+    for ablation in ("no-adf", "deform-only"):
+        _, model = _model(tiny_scene, ["model.scheme=adf-step", f"model.ablation={ablation}"])
+        assert model.spec.scheme == "integrate" and model.spec.carry_until is None and not model.spec.carry_loss
+    _, model = _model(tiny_scene, ["model.scheme=adf-step", "model.ablation=no-pds"])
+    assert model.spec.scheme == "adf-step" and not model.spec.carry_loss  # VG-LOSS-CARRY is the affine velocity's
+    assert model.spec.without_adf().scheme == "integrate"
+
+
+def test_collocation_near_points_stays_within_the_jitter():
+    from velogauss.train.sampling import collocation_near
+
+    points = torch.tensor([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]])
+    x = collocation_near(points, 500, 0.01, np.random.default_rng(0))
+    nearest = torch.cdist(x, points).min(dim=1).values
+    assert x.shape == (500, 3) and nearest.max() < 0.06  # 6 sigma of a 3D normal, 500 draws
+    assert (torch.cdist(x, points).argmin(dim=1) == 0).any() and (torch.cdist(x, points).argmin(dim=1) == 1).any()

@@ -5,7 +5,8 @@ scene) and the resolved `MotionSpec`; the motion itself is the pure function
 `velogauss.model.motion.gaussians_at` (paper eqs. 5-6, spec VG-TRAJ, VG-ADF,
 VG-ADF-COMPOSE). Only the particles flagged `moving` are integrated and deformed; the
 others are rendered at their canonical state, so the cost of motion grows with the moving
-part of the scene.
+part of the scene. Under scheme "adf-step" (VG-CARRY) the ADF's state at a start time is
+carried to t by the velocity instead.
 """
 
 import torch
@@ -46,11 +47,12 @@ class VeloGaussModel(nn.Module):
         """The motion parameter dict (`MotionParameters.params`), None for a static scene."""
         return None if self.motion is None else self.motion.params()
 
-    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None):
+    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None, offset: float = 0.0):
         """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t.
 
         params: the motion parameter dict, when the caller already built it this step;
-        spec: a variant of the model's spec (training skips the ADF before it learns).
+        spec: a variant of the model's spec (training skips the ADF before it learns);
+        offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY).
         """
         spec = self.spec if spec is None else spec
         g = self.gaussians
@@ -60,7 +62,7 @@ class VeloGaussModel(nn.Module):
         params = self.motion.params() if params is None else params
         idx = torch.nonzero(self.moving).squeeze(1)
         x, q, s, xs = motion_fns.gaussians_at(params, spec, x0.index_select(0, idx), q0.index_select(0, idx),
-                                              s0.index_select(0, idx), t)
+                                              s0.index_select(0, idx), t, offset)
         return (x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s),
                 x0.index_copy(0, idx, xs))
 

@@ -6,6 +6,7 @@ Everything the motion computes is a pure function of that dict and the resolved
 `MotionSpec` (velogauss.model.spec), evaluated with `velogauss_fast` (VG-CODE ... VG-DIV):
 
 - `gaussians_at`: the Gaussians at time t (the spec's scheme, then the ADF residual);
+- `carry_loss`: VG-LOSS-CARRY, the velocity fitted to the ADF's paths (scheme "adf-step");
 - `velocity_at`, `particle_velocity`: the learned velocities (Eulerian, and along paths);
 - `motion_residuals`: the physics residuals of the training loss.
 
@@ -20,7 +21,8 @@ from torch import nn
 
 from velogauss.model.spec import MotionSpec
 from velogauss_core.constants import ACC_POLY_DEGREE
-from velogauss_core.motion import N_BASIS, init_motion_params, mlp_layers, network_shapes
+from velogauss_core.motion import N_BASIS, carry_start, init_motion_params, mlp_layers, network_shapes
+from velogauss_fast.motion import carry
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import coefficients
 from velogauss_fast.motion.deform import adf_residual, compose_state
@@ -73,17 +75,25 @@ class MotionParameters(nn.Module):
         return out
 
 
-def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tensor, s0: torch.Tensor, t):
+def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tensor, s0: torch.Tensor, t,
+                 offset: float = 0.0):
     """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t of the
     Gaussians whose canonical state is x0 (N, 3), q0 (N, 4) unit, s0 (N, 3) > 0.
 
-    Paper eqs. 5-6 (VG-TRAJ, VG-ADF, VG-ADF-COMPOSE): z = E(γ(x0)); the base state
-    (x*, q*, s*) by the spec's scheme; x = x* + Δx, q = q* ⊗ Δq, s = s* exp(Δs) with
-    (Δx, Δq, Δs) = ADF(x0, t_adf, z) when spec.adf, t_adf = min(t, spec.adf_clamp_time).
+    Scheme "integrate", paper eqs. 5-6 (VG-TRAJ, VG-ADF, VG-ADF-COMPOSE): z = E(γ(x0)); the
+    base state (x*, q*, s*) integrated from t = 0; x = x* + Δx, q = q* ⊗ Δq, s = s* exp(Δs)
+    with (Δx, Δq, Δs) = ADF(x0, t_adf, z) when spec.adf, t_adf = min(t, spec.adf_clamp_time).
     Without a velocity (deform-only) x* = x0; without PDS only positions move.
+    Scheme "adf-step" (VG-CARRY): the ADF's state at t_start = carry_start(t, offset,
+    spec.carry_until) carried to t by the velocity; the base means are then the means.
+    offset: the signed step training draws (±spec.carry_offset), 0 in evaluation; only
+    "adf-step" reads it.
     """
     cfg = spec.config
     z = physics_code(params, x0, cfg)
+    if spec.scheme == "adf-step":
+        x, q, s = _carried_state(params, spec, x0, q0, s0, z, t, carry_start(t, offset, spec.carry_until))
+        return x, q, s, x
     if spec.scheme == "integrate":
         xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
     else:
@@ -130,6 +140,30 @@ def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):
     if spec.velocity == "mlp":
         return mlp_residuals(params, x, t, cfg, with_divergence=spec.divergence)
     raise ValueError("spec.velocity: a model without velocity has no physics residuals")
+
+
+def carry_loss(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tensor, s0: torch.Tensor, t_a, t):
+    """VG-LOSS-CARRY (0-d tensor): mean squared gap between the affine velocity's step t_a -> t
+    from the ADF's state at t_a and the ADF's position at t, for the Gaussians whose canonical
+    state is x0 (N, 3), q0 (N, 4), s0 (N, 3). Only the velocity (and the code) learns from it.
+    Needs spec.carry_loss (scheme "adf-step", affine velocity)."""
+    if not spec.carry_loss:
+        raise ValueError("spec.carry_loss: VG-LOSS-CARRY needs scheme \"adf-step\" and the affine velocity")
+    z = physics_code(params, x0, spec.config)
+    return carry.carry_loss(params, x0, q0, s0, z, t_a, t, spec.step, spec.integrator, spec.config)
+
+
+def _carried_state(params, spec, x0, q0, s0, z, t, t_start):
+    """Scheme "adf-step": (x, q, s) at t, the ADF's state at t_start carried to t by the
+    velocity (VG-CARRY). Without PDS the velocity MLP carries positions only (rotations and
+    scales stay the ADF's at t_start), with the same stop-gradient on the start."""
+    if spec.velocity == "affine":
+        return carry.carried_state(params, x0, q0, s0, z, t, t_start, spec.step, spec.integrator, spec.config)
+    xa, qa, sa = carry.adf_state(params, x0, q0, s0, z, t_start, spec.config)
+    xs = xa.detach()
+    xv = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec.config), xs, t_start, t, spec.step,
+                   spec.integrator)
+    return xa + (xv - xs), qa, sa
 
 
 def _integrated_state(params, spec, x0, q0, s0, z, t):

@@ -13,22 +13,17 @@ only this spec; no other layer re-derives which pieces run.
 | no-gpc       | affine (PDS)    | yes | no                   |
 | deform-only  | none            | yes | no  (DefGS-style)    |
 
-Adding a training scheme: one more value of `Scheme`, resolved here, and one branch in
-`velogauss.model.motion.gaussians_at` (ARCHITECTURE.md).
+Adding a training scheme: one more value of `Scheme` (velogauss_core.motion), resolved
+here, and one branch in `velogauss.model.motion.gaussians_at` (ARCHITECTURE.md).
 """
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Literal, get_args
 
 from velogauss.model.profile import MotionProfile
-from velogauss_core.motion import Integrator, MotionConfig, VelocityKind
-
-Scheme = Literal["integrate"]
-# How the base state x*(t) comes from the velocity. "integrate": integrate positions (and,
-# with PDS, rotations and scales) from the canonical state at t = 0 (VG-TRAJ), then add the
-# ADF residual (VG-ADF-COMPOSE); the paper's scheme and the only one so far.
-SCHEMES: tuple[str, ...] = get_args(Scheme)
+# `Scheme` ("integrate" (a), "adf-step" (b)) is defined once in velogauss_core.motion, where
+# the config (which this package imports) can type its key.
+from velogauss_core.motion import Integrator, MotionConfig, Scheme, VelocityKind
 
 
 @dataclass(frozen=True)
@@ -52,7 +47,8 @@ ABLATION_SWITCHES: dict[str, _Switches] = {
 class MotionSpec:
     """What the motion of one model computes, resolved once (see the module docstring).
 
-    scheme: how positions come from the velocity (`Scheme`);
+    scheme: how positions come from the velocity (`Scheme`); "adf-step" only where there is
+      a velocity and an ADF (it carries the ADF's state), else resolved to "integrate";
     moving: the scene moves at all (False: a static scene, no motion parameters, every
       other field is then off);
     velocity: "affine" (PDS: Phi(x) w(t, z) over config.mask, VG-VEL), "mlp" (no-pds) or None
@@ -62,9 +58,15 @@ class MotionSpec:
     integrator, step: VG-INTEG's method and largest step in normalised time;
     adf: the ADF residual is built and applied (VG-ADF);
     adf_clamp_time: the ADF's input time is min(t, this), or None (evaluated at every t);
-    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a velocity);
+    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a
+      velocity, scheme "integrate"; under "adf-step" x = x*, the penalty would be 0);
     physics_loss: the VG-LOSS-PHYS transport residual on collocation points is on (GPC);
-    divergence: the VG-DIV term of the physics loss is on (incompressible motion).
+    divergence: the VG-DIV term of the physics loss is on (incompressible motion);
+    carry_until: scheme "adf-step": the end of the ADF's window (max_time), where beyond it
+      the velocity alone carries the ADF's state (VG-CARRY); None for "integrate";
+    carry_offset: scheme "adf-step": |t - t_start| of VG-CARRY in training (0 otherwise);
+    carry_loss: VG-LOSS-CARRY (the affine velocity fitted to the ADF's paths) can be on:
+      scheme "adf-step" with the affine velocity; its weight is train.lambda_carry.
     """
 
     scheme: Scheme
@@ -79,11 +81,16 @@ class MotionSpec:
     adf_loss: bool
     physics_loss: bool
     divergence: bool
+    carry_until: float | None
+    carry_offset: float
+    carry_loss: bool
 
     def without_adf(self) -> "MotionSpec":
         """This spec with the ADF skipped: what training runs before the ADF starts learning
-        (its last layer is still zero then, so skipping it is exactly the identity)."""
-        return dataclasses.replace(self, adf=False)
+        (its last layer is still zero then, so skipping it is exactly the identity). Scheme
+        "adf-step" carries the ADF's state, so without the ADF it is "integrate"."""
+        return dataclasses.replace(self, adf=False, scheme="integrate", carry_until=None, carry_offset=0.0,
+                                   carry_loss=False)
 
 
 def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> MotionSpec:
@@ -100,8 +107,9 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
     clamp = model_cfg.adf_clamp_time and model_cfg.ablation != "deform-only"
     sizes = {f.name: getattr(model_cfg, f.name) for f in dataclasses.fields(MotionConfig)
              if f.name not in ("mask", "acc_mask")}
+    carry = model_cfg.scheme == "adf-step" and adf and velocity is not None
     return MotionSpec(
-        scheme="integrate",
+        scheme="adf-step" if carry else "integrate",
         moving=moving,
         velocity=velocity,
         config=MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask),
@@ -110,8 +118,11 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
         step=float(model_cfg.step),
         adf=adf,
         adf_clamp_time=float(max_time) if clamp else None,
-        adf_loss=adf and velocity is not None,
+        adf_loss=adf and velocity is not None and not carry,  # scheme (b) renders the ADF's state: x = x*
         physics_loss=switches.gpc and velocity is not None,
         divergence=switches.gpc and velocity is not None and bool(profile.divergence),
+        carry_until=float(max_time) if carry else None,
+        carry_offset=float(model_cfg.carry_offset) if carry else 0.0,
+        carry_loss=carry and velocity == "affine",
     )
 

@@ -17,6 +17,10 @@ after the VG-BASIS column groups (`translation`, `rotation`, `stretch`, `shear`)
   the symmetric, trace-free velocity gradient that the VG-BASIS `shear` columns span
   (a simple shear `x += γ t z` would also need the `rotation` columns, as it is pure
   shear plus a spin). Volume-preserving. shear, incompressible.
+- `pulse`: a cube whose stretch along x oscillates, `exp(sin(ω t) diag(k, −k/2, −k/2))`
+  with a period of 2/3: the motion reverses inside the observed window and again in the
+  future (it is back at its canonical shape at t = 1), which no motion extrapolated as a
+  polynomial in t can follow. stretch, incompressible.
 - `grow`: a sphere expanding uniformly as `e^{kt}`: the one compressible scene, so that
   `incompressible = false` is exercised. stretch.
 
@@ -34,7 +38,7 @@ from scipy.spatial.transform import Rotation
 
 from velogauss.data.errors import DataError
 from velogauss.scenes.bodies import Body, Texture
-from velogauss.scenes.motions import LinearFlowMotion, RigidMotion, StaticMotion
+from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
 from velogauss.scenes.scene import AnalyticScene
 
 _ORANGE, _BLUE = (0.95, 0.55, 0.15), (0.15, 0.35, 0.85)
@@ -122,7 +126,18 @@ def grow():
     return AnalyticScene("grow", [ball], effects=["stretch"], incompressible=False)
 
 
-SCENES = {"spin": spin, "toss": toss, "multi": multi, "stretch": stretch, "shear": shear, "grow": grow}
+def pulse():
+    """A checkered cube stretched along x by up to 1.6x and back, with period 2/3 (ω = 3π)."""
+    k = np.log(1.6)
+    cube = Body("cube", "box", centre=(0.0, 0.0, 0.0), size=(0.4, 0.4, 0.4), rotation=np.eye(3),
+                texture=Texture("checker", (_RED, _WHITE), frequency=2.0),
+                motion=PeriodicFlowMotion(centre=(0.0, 0.0, 0.0), generator=np.diag([k, -k / 2, -k / 2]),
+                                          omega=3.0 * np.pi))
+    return AnalyticScene("pulse", [cube], effects=["stretch"], incompressible=True)
+
+
+SCENES = {"spin": spin, "toss": toss, "multi": multi, "stretch": stretch, "shear": shear, "grow": grow,
+          "pulse": pulse}
 DEFAULT_SCENE = "toss"
 
 

@@ -183,6 +183,38 @@ class LinearFlowMotion(Motion):
         return {"type": "linear_flow", "centre": self.centre.tolist(), "generator": self.generator.tolist()}
 
 
+class PeriodicFlowMotion(Motion):
+    """A homogeneous deformation that oscillates: `x(t) = c + exp(sin(ω t) L) (x0 − c)`.
+
+    `generator L (3, 3)` (the amplitude, in log-stretch units), `omega ω` rad per unit time,
+    `centre c (3,)`. Velocity `v = ω cos(ω t) L (x − c)`: the strain rate reverses every half
+    period, and the body returns to its canonical shape whenever `sin(ω t) = 0`. A trace-free
+    L is incompressible. `Ä A⁻¹ = ω² (cos²(ω t) L² − sin(ω t) L)`.
+    """
+
+    def __init__(self, centre, generator, omega):
+        self.centre = _vec("centre", centre)
+        self.generator = np.array(check_array("generator", np.asarray(generator, dtype=np.float64), (3, 3)))
+        self.omega = float(check_scalar("omega", omega))
+
+    def affine(self, t):
+        E = expm(np.sin(self.omega * t) * self.generator)
+        return E, self.centre - E @ self.centre
+
+    def rate(self, t):
+        E_dot = self.omega * np.cos(self.omega * t) * self.generator @ self.affine(t)[0]
+        return E_dot, -E_dot @ self.centre
+
+    def second_rate(self, t):
+        w, L = self.omega, self.generator
+        E_ddot = w * w * (np.cos(w * t) ** 2 * L @ L - np.sin(w * t) * L) @ self.affine(t)[0]
+        return E_ddot, -E_ddot @ self.centre
+
+    def to_dict(self):
+        return {"type": "periodic_flow", "centre": self.centre.tolist(), "generator": self.generator.tolist(),
+                "omega": self.omega}
+
+
 def motion_from_dict(description):
     """Rebuild a motion from `Motion.to_dict()`; raises ValueError naming `description`."""
     if not isinstance(description, dict) or "type" not in description:
@@ -196,6 +228,8 @@ def motion_from_dict(description):
             return RigidMotion(**args)
         if kind == "linear_flow":
             return LinearFlowMotion(**args)
+        if kind == "periodic_flow":
+            return PeriodicFlowMotion(**args)
     except TypeError as err:
         raise ValueError(f"description: bad fields for a {kind!r} motion ({err})") from None
-    raise ValueError(f"description: unknown motion type {kind!r} (static, rigid, linear_flow)")
+    raise ValueError(f"description: unknown motion type {kind!r} (static, rigid, linear_flow, periodic_flow)")

@@ -37,7 +37,8 @@ _ELEVATION_JITTER_DEG = 3.0
 _MOTION_MODEL = ("x(t) = A(t) x0 + b(t) for the material point at x0 at t = 0; "
                  "v(x, t) = dA/dt A^-1 (x - b) + db/dt; "
                  "rigid: A = exp(t [omega]x), b = c(t) - A centre, c(t) = centre + velocity t + gravity t^2 / 2; "
-                 "linear_flow: A = expm(t generator), b = centre - A centre; static: A = I, b = 0")
+                 "linear_flow: A = expm(t generator), b = centre - A centre; "
+                 "periodic_flow: A = expm(sin(omega t) generator), b = centre - A centre; static: A = I, b = 0")
 
 
 def make_scene(name, out_dir, resolution=64, n_views=8, n_times=21, seed=0, *, n_heldout=2, supersample=2,

@@ -29,12 +29,12 @@ from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
 from velogauss.model.build import profile_from_dict
 from velogauss.model.dynamic import render_gaussians
-from velogauss.model.motion import motion_residuals
+from velogauss.model.motion import carry_loss, motion_residuals
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.optim import make_optimizer, set_learning_rates
-from velogauss.train.sampling import FrameSampler, camera_extent, collocation_points
+from velogauss.train.sampling import FrameSampler, camera_extent, collocation_near, collocation_points
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.losses import photometric_loss, physics_loss
 from velogauss_fast.metrics import psnr
@@ -121,8 +121,9 @@ class _Loop:
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
         # deform-only has no velocity to learn first: its ADF is the motion and starts with it.
-        has_velocity = self.spec.velocity is not None
-        default_start = cfg.train.warmup + cfg.train.curriculum if has_velocity else cfg.train.warmup
+        # Under scheme "adf-step" the ADF is the motion inside the window (VG-CARRY): it starts with the motion too.
+        adf_first = self.spec.velocity is None or self.spec.scheme == "adf-step"
+        default_start = cfg.train.warmup if adf_first else cfg.train.warmup + cfg.train.curriculum
         self.adf_start = default_start if cfg.train.adf_start < 0 else cfg.train.adf_start
 
     def run(self, start, progress):
@@ -167,14 +168,17 @@ class _Loop:
         if spec.moving:
             self.freeze_motion(it)
             params = model.motion.params()  # once per step: the render and the physics loss share it
-        means, quats, scales, base = model.state_at(frame.time, params, spec)
+        means, quats, scales, base = model.state_at(frame.time, params, spec, self.carry_offset(it, spec))
         image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
-        meta["mean2d"].retain_grad()
+        if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
+            meta["mean2d"].retain_grad()
         loss = photometric_loss(image, gt)
         if motion_on and self.spec.adf_loss:
             loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
         if motion_on and spec.physics_loss:
             loss = loss + self.physics_loss(it, params, spec)
+        if motion_on and spec.carry_loss and cfg.train.lambda_carry > 0:
+            loss = loss + cfg.train.lambda_carry * self.carry_loss(it, params, spec)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad = meta["mean2d"].grad
@@ -199,17 +203,53 @@ class _Loop:
         step count, and its bias correction would later inflate their first real updates.
         """
         motion = self.model.motion
-        motion.requires_grad_(it >= self.cfg.train.warmup)
+        t = self.cfg.train
+        motion.requires_grad_(it >= t.warmup)
+        if t.motion_only:
+            self.model.gaussians.requires_grad_(it < t.warmup)
         if self.spec.adf:
             motion.adf.requires_grad_(it >= self.adf_start)
 
+    def carry_offset(self, it, spec):
+        """Scheme "adf-step": the signed step ±spec.carry_offset of VG-CARRY, a fair coin per
+        iteration once the motion trains (the authors' released code); else 0."""
+        if spec.scheme != "adf-step" or it < self.cfg.train.warmup:
+            return 0.0
+        return spec.carry_offset * (1.0 if self.rng.random() < 0.5 else -1.0)
+
+    def carry_loss(self, it, params, spec):
+        """VG-LOSS-CARRY on up to `carry_points` moving Gaussians, between two times of the
+        window opened so far (the ADF has seen no frame after it): t uniform in it, t_a up
+        to `carry_horizon` away on either side."""
+        t_cfg, g, model = self.cfg.train, self.model.gaussians, self.model
+        window = self.sampler.window(it)
+        t = float(self.rng.uniform(0.0, window))
+        t_a = float(np.clip(t + self.rng.uniform(-t_cfg.carry_horizon, t_cfg.carry_horizon), 0.0, window))
+        idx = torch.nonzero(model.moving).squeeze(1)
+        if len(idx) > t_cfg.carry_points:
+            idx = idx[torch.as_tensor(self.rng.choice(len(idx), t_cfg.carry_points, replace=False), device=idx.device)]
+        x0, q0, s0 = (v.detach().index_select(0, idx) for v in (g.means, g.quats, g.scales))
+        return carry_loss(params, spec, x0, q0, s0, t_a, t)
+
     def physics_loss(self, it, params, spec):
-        """Ramped VG-LOSS-PHYS on fresh collocation points (motion parameter dict `params`)."""
+        """Ramped VG-LOSS-PHYS on fresh collocation points (motion parameter dict `params`),
+        uniform in the grown box or, with physics.placement "gaussians", near the moving
+        Gaussians at the collocation time."""
         p = self.cfg.physics
         ramp = min(1.0, (it - self.cfg.train.warmup + 1) / max(1, p.ramp))
         x, t = collocation_points(self.data.bounds, p.bounds_margin, p.n_points, self.rng, torch.float32, self.device)
+        if p.placement == "gaussians" and bool(self.model.moving.any()):  # else the box: nothing to be near
+            x = self.collocation_near_gaussians(t, params, spec)
         r, div = motion_residuals(params, spec, x, t)
         return physics_loss(r, div, ramp * p.lambda_transport, ramp * p.lambda_div)
+
+    def collocation_near_gaussians(self, t, params, spec):
+        """Collocation points near the moving Gaussians' means at time t (placement "gaussians")."""
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in self.data.bounds)
+        with torch.no_grad():
+            means = self.model.state_at(t, params, spec)[0][self.model.moving]
+        return collocation_near(means, self.cfg.physics.n_points,
+                                self.cfg.physics.jitter * float(np.linalg.norm(hi - lo)), self.rng)
 
     def maintain(self, done):
         """Density control, opacity resets and static detection due after `done` iterations

@@ -14,8 +14,9 @@ from velogauss_fast.quaternion import normalize_quat
 from velogauss_core.constants import STAGE_CHUNK
 
 
-def base_state(params, x0, q0, s0, z, t, h, method, cfg):
-    """Integrate (x, q, log s) from 0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ).
+def base_state(params, x0, q0, s0, z, t, h, method, cfg, t0=0.0):
+    """Integrate (x, q, log s) from t0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ;
+    VG-STEP: a start time t0 other than 0, the state (x0, q0, s0) then being the state at t0).
 
     params: motion parameter dict; x0: (N, 3) canonical means; q0: (N, 4) quaternions (any
     norm); s0: (N, 3) positive scales; z: (N, L) frozen physics codes; t: scalar target time
@@ -38,7 +39,8 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         raise ValueError("s0: expected positive scales")
     check_array("z", z, (n, params["mix"][0][0].shape[0]))
     check_time("t", t)
-    sched = schedule(0.0, t, h, method)  # once: the stage times and the integration share it
+    check_time("t0", t0)
+    sched = schedule(t0, t, h, method)  # once: the stage times and the integration share it
     taus = sched.stage_times()
     plan = rate_plan(cfg.mask, x0.dtype, x0.device)
     lay = plan.layout

@@ -14,8 +14,9 @@ from velogauss_ref.motion.rotscale import rotscale_rates
 from velogauss_ref.motion.velocity import velocity
 from velogauss_ref.quaternion import normalize_quat
 
-def base_state(params, x0, q0, s0, z, t, h, method, cfg):
-    """Integrate y = (x, q, log s) from 0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ).
+def base_state(params, x0, q0, s0, z, t, h, method, cfg, t0=0.0):
+    """Integrate y = (x, q, log s) from t0 to t in the per-particle field Phi(x) w(tau, z) (VG-TRAJ;
+    VG-STEP: a start time t0 other than 0, the state (x0, q0, s0) then being the state at t0).
 
     params: motion parameter dict; x0: (N, 3) canonical means; q0: (N, 4) quaternions, any
     norm; s0: (N, 3) positive scales; z: (N, L) physics codes, frozen along each path;
@@ -36,6 +37,7 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         raise ValueError("s0: expected positive scales")
     check_array("z", z, (n, np.shape(params["mix"][0][0])[0]))
     check_scalar("t", t)
+    check_scalar("t0", t0)
 
     def rates(y, tau):
         x, q = y[:, 0:3], y[:, 3:7]
@@ -44,5 +46,5 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg):
         return np.concatenate([velocity(x, w), q_dot, log_s_dot], axis=1)
 
     y0 = np.concatenate([x0, q0, np.log(s0)], axis=1)  # (N, 10)
-    y = integrate(rates, y0, 0.0, t, h, method)
+    y = integrate(rates, y0, t0, t, h, method)
     return y[:, 0:3], normalize_quat(y[:, 3:7]), np.exp(y[:, 7:10])

@@ -1,0 +1,261 @@
+"""Motion fidelity study: where the velocity error enters, and which training scheme removes it.
+
+Three levels per catalogue scene (velogauss.scenes.catalog), each scored with the motion
+metrics of `velogauss.evaluate` (particle velocity relative L2 error over the observed and the
+future times; physics trajectory error against the nothing-moved error) and, from images,
+the interpolation / extrapolation PSNR and the freeze baseline:
+
+* `fit` -- the representational floor: the motion model alone (`no-adf` ablation, no
+  rendering) fitted to the analytic trajectories of points on the moving bodies' surfaces at
+  the observed frame times (t <= max_time), by Adam on the mean squared position error. The
+  positions at successive frame times come from one chained integration (VG-STEP).
+  `fit-all` fits every frame time in [0, 1] (what the basis can express at all).
+* `opt` -- the optimisation floor: training from images with the Gaussians initialised on
+  the true bodies at t = 0 with their true colours (the generated `points3d.ply`), no
+  densification or opacity reset, and only the motion training after the warm-up
+  (`train.motion_only`).
+* `full` -- the full pipeline (`velogauss train` defaults plus the variant's overrides).
+
+Every run's numbers are cached as JSON under `--cache` (default runs/fidelity), so the
+tables can be rebuilt (`table`) without retraining. Results go to benchmarks/FIDELITY.md.
+
+Regenerate (one core: export OMP_NUM_THREADS=1):
+  python -m velogauss.bench.fidelity run --scenes toss,stretch --seeds 0 --levels fit,fit-all,opt,full --variants a
+  python -m velogauss.bench.fidelity run --scenes toss --seeds 0,1 --levels full --variants a,b
+  python -m velogauss.bench.fidelity table --scenes all --levels all --variants all --seeds all
+(`rescore` recomputes the motion scores of the selected trained runs from their checkpoints.)
+"""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from velogauss.config import load_config
+from velogauss.data import load_scene
+from velogauss.evaluate import (evaluate_split, freeze_baseline, moving_surface_points, trajectory_error,
+                                velocity_error)
+from velogauss.io_utils import write_text
+from velogauss.model import build_model
+from velogauss.model.profile import resolve_profile
+from velogauss.scenes import make_scene
+from velogauss.scenes.catalog import SCENES
+from velogauss_fast.motion.code import physics_code
+from velogauss_fast.motion.trajectory import base_state
+
+LEVELS = ("fit", "fit-all", "opt", "full")
+# The training variants compared (config overrides). "a" and "b" are the two schemes of
+# spec/motion.md at the defaults; the others change one thing each.
+VARIANTS = {
+    "a": [],
+    "b": ["model.scheme=adf-step"],
+    "a-no-gpc": ["model.ablation=no-gpc"],
+    "a-no-adf": ["model.ablation=no-adf"],
+    "a-fixed-means": ["train.lr_means=1e-12", "train.lr_means_final=1e-12"],
+    "b-no-gpc": ["model.scheme=adf-step", "model.ablation=no-gpc"],
+    "a-phys10": ["physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
+    "a-phys100": ["physics.lambda_transport=1e-1", "physics.lambda_div=1e-1"],
+    "b-phys10": ["model.scheme=adf-step", "physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
+    "deform-only": ["model.ablation=deform-only"],
+    "b-carry": ["model.scheme=adf-step", "train.lambda_carry=1.0"],
+    "b-carry-near": ["model.scheme=adf-step", "train.lambda_carry=1.0", "physics.placement=gaussians"],
+    "a-near": ["physics.placement=gaussians"],
+    "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
+}
+OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
+# The representational fit: points on the moving surfaces (a seed other than the
+# evaluation's), Adam iterations and learning rate (decayed 100x, log-linearly).
+FIT_POINTS, FIT_SEED, FIT_ITERATIONS, FIT_LR = 600, 1, 3000, 3e-3
+FRAME_TIMES = np.linspace(0.0, 1.0, 21)  # the generated scenes' frame times (make_scene's n_times)
+
+
+def scene_dir(cache, name):
+    """The generated scene `name` (catalogue defaults) under `cache`/data, made once."""
+    path = Path(cache) / "data" / name
+    if not (path / "transforms_train.json").is_file():
+        make_scene(name, path)
+    return path
+
+
+def motion_scores(model, scene, max_time):
+    """Velocity and trajectory errors (velogauss.evaluate) reduced to the study's numbers."""
+    vel = velocity_error(model, scene, max_time)
+    traj = trajectory_error(model, scene, max_time)
+    out = {"gaussians_tracked": traj["gaussians"]}
+    for split in ("observed", "future"):
+        out[f"vel_{split}"] = vel[split]["relative_l2"]
+        out[f"field_{split}"] = vel[split]["field_relative_l2"]
+        moved, still = traj[split]["mean_distance"], traj[split]["static_mean_distance"]
+        out[f"traj_{split}"] = moved
+        out[f"traj_ratio_{split}"] = moved / still if moved is not None and still else None
+    return out
+
+
+def fit_level(name, seed, overrides, all_times, max_time=0.75):
+    """The `fit` / `fit-all` level (module docstring): returns the scores and the final loss."""
+    scene = SCENES[name]()
+    rng = np.random.default_rng(seed)
+    torch.manual_seed(seed)
+    cfg = load_config(None, ["model.ablation=no-adf", *overrides])
+    profile = resolve_profile(cfg.model.effects, cfg.model.incompressible,
+                              {"effects": scene.effects, "incompressible": scene.incompressible})
+    x0 = moving_surface_points(scene, FIT_POINTS, FIT_SEED)
+    model = build_model(cfg, profile, x0, None, rng)
+    times = [float(t) for t in FRAME_TIMES if all_times or t <= max_time + 1e-9]
+    targets = [torch.as_tensor(scene.position(x0, t, margin=np.inf), dtype=torch.float32) for t in times]
+    params = [p for p in model.motion.parameters()]
+    optimizer = torch.optim.Adam(params, lr=FIT_LR)
+    clock = time.perf_counter()
+    g = model.gaussians
+    for it in range(FIT_ITERATIONS):
+        for group in optimizer.param_groups:
+            group["lr"] = FIT_LR * 0.01 ** (it / FIT_ITERATIONS)
+        loss = _chained_loss(model, g.means.detach(), torch.nn.functional.normalize(g.quats.detach(), dim=1),
+                             g.scales.detach(), times, targets)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+    wall = time.perf_counter() - clock
+    model.eval()
+    return {**motion_scores(model, scene, max_time), "fit_rmse": float(loss.detach()) ** 0.5, "wall_s": wall}
+
+
+def _chained_loss(model, x0, q0, s0, times, targets):
+    """Mean squared position error at `times`, integrating from each time to the next (VG-STEP)."""
+    params, spec = model.motion.params(), model.spec
+    z = physics_code(params, x0, spec.config)
+    x, q, s, t_prev, total = x0, q0, s0, 0.0, 0.0
+    for t, gt in zip(times, targets):
+        if t > t_prev:
+            x, q, s = base_state(params, x, q, s, z, t, spec.step, spec.integrator, spec.config, t0=t_prev)
+        total = total + ((x - gt) ** 2).sum(1).mean()
+        t_prev = t
+    return total / len(times)
+
+
+def train_level(name, seed, overrides, cache, tag):
+    """The `opt` / `full` level: train from the generated images, then score images and motion."""
+    from velogauss.train.loop import train
+
+    data_dir = scene_dir(cache, name)
+    cfg = load_config(None, [f"train.seed={seed}", "train.eval_every=0", "train.checkpoint_every=0",
+                             f"data.dir={data_dir}", *overrides])
+    data = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
+                      background=cfg.data.background)
+    clock = time.perf_counter()
+    model = train(cfg, data, Path(cache) / "runs" / tag, progress=False)
+    wall = time.perf_counter() - clock
+    from velogauss.scenes import load_ground_truth
+
+    scene = load_ground_truth(data_dir)
+    with torch.no_grad():
+        interp = evaluate_split(model, data.interpolation, data.background, with_lpips=False)["mean"]["psnr"]
+        extrap = evaluate_split(model, data.extrapolation, data.background, with_lpips=False)["mean"]["psnr"]
+        frozen = freeze_baseline(model, data.extrapolation, data.background, data.max_time)["mean"]["psnr"]
+    return {**motion_scores(model, scene, data.max_time), "interp_psnr": interp, "extrap_psnr": extrap,
+            "frozen_psnr": frozen, "wall_s": wall, "n_gaussians": len(model.gaussians),
+            "n_moving": int(model.moving.sum())}
+
+
+def run_one(name, level, variant, seed, cache, extra=()):
+    """Run (or read from the cache) one (scene, level, variant, seed); returns its record."""
+    tag = f"{name}-{level}-{variant}-s{seed}"
+    file = Path(cache) / "results" / f"{tag}.json"
+    if file.is_file():
+        return json.loads(file.read_text())
+    overrides = [*VARIANTS[variant], *extra]
+    if level in ("fit", "fit-all"):
+        scores = fit_level(name, seed, overrides, all_times=level == "fit-all")
+    else:
+        scores = train_level(name, seed, overrides + (OPT_FLOOR if level == "opt" else []), cache, tag)
+    record = {"scene": name, "level": level, "variant": variant, "seed": seed, "overrides": overrides, **scores}
+    write_text(file, json.dumps(record, indent=1))
+    return record
+
+
+def rescore(record, cache):
+    """The record with its motion scores recomputed from the run's final checkpoint (after a
+    change of the metric, e.g. EVAL_VELOCITY_FLOOR); fit levels keep no checkpoint and are
+    returned unchanged."""
+    from velogauss.scenes import load_ground_truth
+    from velogauss.train.checkpoint import load_model
+
+    if record["level"] not in ("opt", "full"):
+        return record
+    tag = f"{record['scene']}-{record['level']}-{record['variant']}-s{record['seed']}"
+    model, cfg = load_model(Path(cache) / "runs" / tag)
+    scene = load_ground_truth(scene_dir(cache, record["scene"]))
+    updated = {**record, **motion_scores(model, scene, cfg.data.max_time)}
+    write_text(Path(cache) / "results" / f"{tag}.json", json.dumps(updated, indent=1))
+    return updated
+
+
+COLUMNS = [("vel_observed", "vel. err obs", "{:.3f}"), ("vel_future", "vel. err fut", "{:.3f}"),
+           ("traj_ratio_observed", "traj/still obs", "{:.3f}"), ("traj_ratio_future", "traj/still fut", "{:.3f}"),
+           ("interp_psnr", "interp dB", "{:.2f}"), ("extrap_psnr", "extrap dB", "{:.2f}"),
+           ("frozen_psnr", "frozen dB", "{:.2f}"), ("wall_s", "wall s", "{:.0f}")]
+
+
+def table(records):
+    """Markdown table: one row per (scene, level, variant), the mean over its seeds (seed count shown)."""
+    groups = {}
+    for r in records:
+        groups.setdefault((r["scene"], r["level"], r["variant"]), []).append(r)
+    head = "| scene | level | variant | seeds | " + " | ".join(c[1] for c in COLUMNS) + " |"
+    lines = [head, "|" + "---|" * (4 + len(COLUMNS))]
+    for (scene, level, variant), rows in sorted(groups.items(), key=lambda kv: (kv[0][0], LEVELS.index(kv[0][1]),
+                                                                                 kv[0][2])):
+        cells = []
+        for key, _, fmt in COLUMNS:
+            values = [r[key] for r in rows if r.get(key) is not None]
+            cells.append(fmt.format(float(np.mean(values))) if values else "—")
+        lines.append(f"| {scene} | {level} | {variant} | {len(rows)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def load_records(cache):
+    return [json.loads(p.read_text()) for p in sorted((Path(cache) / "results").glob("*.json"))]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m velogauss.bench.fidelity", description=__doc__.split("\n")[0])
+    parser.add_argument("command", choices=("run", "table", "rescore"))
+    parser.add_argument("--scenes", default="toss")
+    parser.add_argument("--seeds", default="0")
+    parser.add_argument("--levels", default="full")
+    parser.add_argument("--variants", default="a")
+    parser.add_argument("--set", action="append", default=[], help="extra config override KEY=VALUE")
+    parser.add_argument("--cache", default="runs/fidelity")
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    if args.command == "run":
+        for name in args.scenes.split(","):
+            for level in args.levels.split(","):
+                variants = ["a"] if level.startswith("fit") else args.variants.split(",")
+                for variant in variants:
+                    for seed in (int(s) for s in args.seeds.split(",")):
+                        record = run_one(name, level, variant, seed, args.cache, args.set)
+                        print(json.dumps({k: record.get(k) for k in ("scene", "level", "variant", "seed",
+                                                                      *(c[0] for c in COLUMNS))}), flush=True)
+    records = [r for r in load_records(args.cache) if _selected(r, args)]
+    if args.command == "rescore":
+        records = [rescore(r, args.cache) for r in records]
+    print(table(records))
+
+
+def _selected(record, args):
+    """Whether a cached record is in the --scenes / --levels / --variants / --seeds selection
+    of a `table` command ("all" selects everything)."""
+    if args.command == "run":
+        return True
+    return all(value == "all" or str(record[key]) in value.split(",")
+               for key, value in (("scene", args.scenes), ("level", args.levels), ("variant", args.variants),
+                                  ("seed", args.seeds)))
+
+
+if __name__ == "__main__":
+    main()
