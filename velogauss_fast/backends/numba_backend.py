@@ -45,18 +45,24 @@ def get_num_threads():
 
 
 def _run_parts(kernel, n_parts, *args):
-    """kernel(part, n_parts, *args) for every part, in parallel; returns the results in part order."""
+    """kernel(part, n_parts, *args) for every part, in parallel; returns the results in part order.
+
+    The calling thread runs part 0 itself and the pool the others: one thread fewer to wake,
+    and the caller, already on a core, never waits idle for a pool thread to be scheduled.
+    """
     global _POOL, _POOL_SIZE
     if n_parts == 1:
         return [kernel(0, 1, *args)]
     with _POOL_LOCK:
-        if _POOL_SIZE < n_parts:
+        if _POOL_SIZE < n_parts - 1:
             if _POOL is not None:
                 _POOL.shutdown(wait=False)
-            _POOL = ThreadPoolExecutor(max_workers=n_parts, thread_name_prefix="velogauss-numba")
-            _POOL_SIZE = n_parts
+            _POOL = ThreadPoolExecutor(max_workers=n_parts - 1, thread_name_prefix="velogauss-numba")
+            _POOL_SIZE = n_parts - 1
         pool = _POOL
-    return list(pool.map(lambda k: kernel(k, n_parts, *args), range(n_parts)))
+    others = [pool.submit(kernel, k, n_parts, *args) for k in range(1, n_parts)]
+    first = kernel(0, n_parts, *args)
+    return [first] + [f.result() for f in others]
 
 
 def _parameters(rgb, spans):
