@@ -11,11 +11,11 @@ import os
 from pathlib import Path
 
 from velogauss.io_utils import atomic_path
-from velogauss.walkthrough import (blending, deformation, fields, gaussians, integration, losses_metrics,
+from velogauss.walkthrough import (blending, carry, deformation, fields, gaussians, integration, losses_metrics,
                                        networks, physics, screen, spec_text)
 from velogauss.walkthrough.printing import SIGNIFICANT_DIGITS, TIMINGS_END, TIMINGS_START, ZERO_BELOW
 
-PARTS = (gaussians, screen, blending, networks, fields, integration, deformation, physics, losses_metrics)
+PARTS = (gaussians, screen, blending, networks, fields, integration, carry, deformation, physics, losses_metrics)
 SECTIONS = {spec_id: section for part in PARTS for spec_id, section in part.SECTIONS.items()}
 # Links in the page are relative to the committed copy's folder, whatever --out is, so that
 # every regeneration writes the same text.
