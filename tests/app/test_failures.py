@@ -23,7 +23,7 @@ from velogauss import io_utils
 from velogauss.cli import app
 from velogauss.train import loop
 from velogauss.train.checkpoint import FORMAT, checkpoint_path
-from velogauss_ref.constants import SSIM_WINDOW, TIME_HORIZON
+from velogauss_core.constants import SSIM_WINDOW, TIME_HORIZON
 
 # Few iterations, a small model; eval and checkpoint every 2 so logs and checkpoints exist
 # in the middle of a run.
