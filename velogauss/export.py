@@ -112,7 +112,7 @@ def export_ply(model, t, path):
 
 def check_time(t, name="t"):
     """Return `t` as a float; ValueError naming `name` when it is not a finite real number or
-    lies beyond the horizon |t| <= TIME_HORIZON (velogauss_ref.constants, where the why is)."""
+    lies beyond the horizon |t| <= TIME_HORIZON (velogauss_core.constants, where the why is)."""
     try:
         value = float(t)
     except (TypeError, ValueError):

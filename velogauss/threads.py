@@ -1,10 +1,12 @@
 """CPU threads of a velogauss process: how many, and how the idle ones wait.
 
 A training step runs hundreds of small torch operations and two large ones (the numba
-compositing, forward and backward). torch's CPU threads are GNU OpenMP's (libgomp): every
-parallel operation ends at a barrier where the finished threads spin, and waits for the
-slowest one. When another process shares the cores, that one is often descheduled, and
-every small operation then costs a scheduler time slice (measured in benchmarks/RESULTS.md,
+compositing, forward and backward). torch's CPU threads are GNU OpenMP's (libgomp): with two
+threads an iteration opens ~650 parallel regions, each ending at a barrier that waits for
+the slowest thread. Beside another CPU-bound process a region costs 129 µs instead of 14 µs
+(up to a whole scheduler time slice on a busier machine): the workers spin between regions,
+use up their scheduler credit, and are then run late when their work arrives. One torch
+thread opens no region at all (benchmarks/RESULTS.md, "Where contention comes from" and
 "Contention"). So, by default:
 
 * torch gets **one** thread: its small operations never wait on a barrier;

@@ -123,14 +123,15 @@ def test_load_bench_quick(tmp_path):
     body = section(out.read_text(), "Contention")
     assert "Regenerate: `python -m velogauss.bench.load --settings velogauss --workloads numba train --quick`" in body
     header, rows = table(body)
-    assert header == ["setting", "workload", "idle (s)", "beside a busy process (s)", "beside a 2nd training (s)",
+    assert header == ["setting", "workload", "idle (ms)", "beside a busy process (ms)", "beside a 2nd training (ms)",
                       "slowdown busy", "slowdown training", "threads (torch / compositing)"]
     assert [row[:2] for row in rows] == [["velogauss", "numba"], ["velogauss", "train"]]
     for row in rows:
         idle, busy, training = (float(v) for v in row[2:5])
         assert idle > 0 and busy > 0 and training > 0
-        # The ratios are the table's own times divided (3 significant digits printed).
+        # The ratios are the table's own times divided (times rounded to 0.01 ms, ratios to 0.01).
         assert float(row[5].rstrip("x")) == pytest.approx(busy / idle, rel=0.02, abs=0.01)
+        assert float(row[6].rstrip("x")) == pytest.approx(training / idle, rel=0.02, abs=0.01)
         # The workers start without the caller's OMP_NUM_THREADS: the default setting's
         # torch thread and one compositing thread per available core.
         assert row[7] == f"1 / {len(os.sched_getaffinity(0))}"

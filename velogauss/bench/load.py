@@ -266,15 +266,15 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", settings=DEFAULT_SETTING
 
 
 def _table(measured, settings, workloads):
-    lines = ["| setting | workload | idle (s) | beside a busy process (s) | beside a 2nd training (s) "
+    lines = ["| setting | workload | idle (ms) | beside a busy process (ms) | beside a 2nd training (ms) "
              "| slowdown busy | slowdown training | threads (torch / compositing) |",
              "|---|---|---|---|---|---|---|---|"]
     for s in settings:
         idle = measured[s, "idle"]
         threads = f"{idle['torch_threads']} / {idle['composite_threads']}"
         for w in workloads:
-            t = {c: measured[s, c]["results"][w]["mean_s"] for c in CONDITIONS}
-            lines.append(f"| {s} | {w} | {t['idle']:.4f} | {t['busy']:.4f} | {t['training']:.4f} "
+            t = {c: 1e3 * measured[s, c]["results"][w]["mean_s"] for c in CONDITIONS}
+            lines.append(f"| {s} | {w} | {t['idle']:.2f} | {t['busy']:.2f} | {t['training']:.2f} "
                          f"| {t['busy'] / t['idle']:.2f}x | {t['training'] / t['idle']:.2f}x | {threads} |")
     return "\n".join(lines)
 
