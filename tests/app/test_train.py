@@ -212,13 +212,7 @@ def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, m
 @pytest.mark.parametrize("ablation", ["no-pds", "no-adf", "no-gpc", "deform-only"])
 def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
     cfg = load_config(None, TINY + [f"model.ablation={ablation}", "train.iterations=8"])
-    model = loop.train(cfg, tiny_scene, tmp_path, progress=False)
-    reloaded, _ = load_model(tmp_path)
-    frame = tiny_scene.extrapolation[0]
-    with torch.no_grad():
-        a = model.render(frame.camera, frame.time, tiny_scene.background)[0]
-        b = reloaded.render(frame.camera, frame.time, tiny_scene.background)[0]
-    assert torch.isfinite(a).all() and torch.equal(a, b)
+    reloaded = _trains_and_reloads(cfg, tiny_scene, tmp_path)
     has_velocity = ablation != "deform-only"
     assert reloaded.has_velocity == has_velocity
     assert reloaded.spec.adf == (ablation != "no-adf")
@@ -251,13 +245,7 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
                                    ["physics.placement=gaussians"], ["train.motion_only=true"]])
 def test_schemes_and_options_train_and_reload(tiny_scene, tmp_path, extra):
     cfg = load_config(None, TINY + extra)
-    model = loop.train(cfg, tiny_scene, tmp_path, progress=False)
-    reloaded, _ = load_model(tmp_path)
-    frame = tiny_scene.extrapolation[0]
-    with torch.no_grad():
-        a = model.render(frame.camera, frame.time, tiny_scene.background)[0]
-        b = reloaded.render(frame.camera, frame.time, tiny_scene.background)[0]
-    assert torch.isfinite(a).all() and torch.equal(a, b)
+    _trains_and_reloads(cfg, tiny_scene, tmp_path)
 
 
 def test_adf_step_scheme_renders_the_adf_inside_the_window_and_the_velocity_beyond(tiny_scene):
@@ -310,3 +298,16 @@ def test_collocation_near_points_stays_within_the_jitter():
     nearest = torch.cdist(x, points).min(dim=1).values
     assert x.shape == (500, 3) and nearest.max() < 0.06  # 6 sigma of a 3D normal, 500 draws
     assert (torch.cdist(x, points).argmin(dim=1) == 0).any() and (torch.cdist(x, points).argmin(dim=1) == 1).any()
+
+
+def _trains_and_reloads(cfg, scene, run_dir):
+    """Train `cfg`, reload the run, check both render the first future frame finite and
+    identically; return the reloaded model."""
+    model = loop.train(cfg, scene, run_dir, progress=False)
+    reloaded, _ = load_model(run_dir)
+    frame = scene.extrapolation[0]
+    with torch.no_grad():
+        a = model.render(frame.camera, frame.time, scene.background)[0]
+        b = reloaded.render(frame.camera, frame.time, scene.background)[0]
+    assert torch.isfinite(a).all() and torch.equal(a, b)
+    return reloaded
