@@ -17,7 +17,7 @@ machine's load average before and after (the wall-clock numbers are only as quie
 machine was), and the process's CPU time per frame (summed over its threads), which other
 work on the machine inflates far less: 1 / (CPU time per frame) is the frame rate the
 process reaches on one core of its own, a lower bound for what it reaches on two.
-Regenerate: python -m velogauss.bench.viewer --threads 2   (or: velogauss bench viewer)
+Regenerate: python -m velogauss.bench.viewer   (or: velogauss bench viewer)
 """
 
 import argparse
@@ -27,6 +27,8 @@ import time
 
 import numpy as np
 import torch
+
+from velogauss.threads import apply_threads
 
 from velogauss.bench.harness import machine, regenerate_command, write_section
 
@@ -68,16 +70,12 @@ def frame(renderer, camera, t, max_time):
     return _encode_image_binary(image, "jpeg", JPEG_QUALITY)[1]
 
 
-def run(out_path="benchmarks/RESULTS.md", device="cpu", n_points=10_000, size=256, frames=20, rounds=5, threads=2,
+def run(out_path="benchmarks/RESULTS.md", device="cpu", n_points=10_000, size=256, frames=20, rounds=5, threads=0,
         quick=False):
     """Measure the three kinds of frame and write the RESULTS.md section; return the rows."""
     if device != "cpu":
         raise ValueError(f"device: this benchmark runs on the CPU only, got {device!r}")
-    if threads:
-        import numba
-
-        torch.set_num_threads(threads)
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    apply_threads(threads)  # what `velogauss view --threads` sets (0: velogauss's default)
     if quick:
         n_points, frames, rounds = 500, 2, 1
     load_before = os.getloadavg()
@@ -135,7 +133,7 @@ def main(argv=None):
     parser.add_argument("--out", default="benchmarks/RESULTS.md")
     parser.add_argument("--points", type=int, default=10_000)
     parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--threads", type=int, default=0, help="0: velogauss's default, as `velogauss view`")
     parser.add_argument("--quick", action="store_true", help="a tiny smoke-test configuration")
     args = parser.parse_args(argv)
     run(args.out, n_points=args.points, size=args.size, threads=args.threads, quick=args.quick)
