@@ -53,6 +53,20 @@ def test_curriculum_opens_the_time_window():
     assert static.window(0) == 0.75  # nothing moves: every frame from the start
 
 
+def test_views_of_a_step_share_one_time_and_differ_in_camera():
+    times = np.repeat([0.0, 0.25, 0.5], 4)  # 4 cameras per time
+    sampler = FrameSampler(times, warmup=0, curriculum=1, moving=True)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        views = sampler.sample_views(5, rng, 3)
+        assert len(views) == len(set(views)) == 3
+        assert len({times[i] for i in views}) == 1
+    # More views than cameras at that time: every camera once.
+    views = sampler.sample_views(5, rng, 9)
+    assert sorted(views) == list(np.flatnonzero(times == times[views[0]]))
+    assert len(sampler.sample_views(5, rng, 1)) == 1
+
+
 def _model(tiny_scene, overrides=()):
     cfg = load_config(None, TINY + list(overrides))
     profile = scene_profile(cfg, tiny_scene.metadata)

@@ -23,6 +23,8 @@ Regenerate (one core: export OMP_NUM_THREADS=1):
   python -m velogauss.bench.fidelity run --scenes toss,stretch --seeds 0 --levels fit,fit-all,opt,full --variants a
   python -m velogauss.bench.fidelity run --scenes toss --seeds 0,1 --levels full --variants a,b
   python -m velogauss.bench.fidelity table --scenes all --levels all --variants all --seeds all
+  python -m velogauss.bench.fidelity run --scenes toss --seeds 0,1 --levels full --variants cost-v1-i2000,...
+  python -m velogauss.bench.fidelity pareto   (accuracy against training time, from the cost-* runs)
 (`rescore` recomputes the motion scores of the selected trained runs from their checkpoints.)
 """
 
@@ -36,14 +38,15 @@ import torch
 
 from velogauss.config import load_config
 from velogauss.data import load_scene
-from velogauss.evaluate import (evaluate_split, freeze_baseline, moving_surface_points, trajectory_error,
-                                velocity_error)
+from velogauss.evaluate import (MOTION_EVAL_TIMES, evaluate_split, freeze_baseline, moving_surface_points,
+                                trajectory_error, velocity_error)
 from velogauss.io_utils import write_text
 from velogauss.model import build_model
 from velogauss.model.profile import resolve_profile
 from velogauss.scenes import make_scene
 from velogauss.scenes.catalog import SCENES
 from velogauss_fast.motion.code import physics_code
+from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.motion.trajectory import base_state
 
 LEVELS = ("fit", "fit-all", "opt", "full")
@@ -64,7 +67,23 @@ VARIANTS = {
     "b-carry-near": ["model.scheme=adf-step", "train.lambda_carry=1.0", "physics.placement=gaussians"],
     "a-near": ["physics.placement=gaussians"],
     "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
+    # The training budget before views per step were chosen (train.views = 1).
+    "a-views1": ["train.views=1"],
+    "a-views3": ["train.views=3"],
+    "a-views3-near": ["train.views=3", "physics.placement=gaussians"],
+    "a-views3-adf10": ["train.views=3", "train.lambda_adf=10"],
 }
+# Accuracy against training time (the `pareto` command): each variant changes what one run
+# costs -- views per iteration, iterations, motion patterns K, integrator -- and nothing else.
+COST_VARIANTS = {
+    **{f"cost-v{v}-i{i}": [f"train.views={v}", f"train.iterations={i}"]
+       for v in (1, 3) for i in (2000, 3000, 6000)},
+    "cost-v3-k8": ["train.views=3", "model.n_patterns=8"],
+    "cost-v3-euler": ["train.views=3", "model.integrator=euler"],
+    "cost-v3-rk4": ["train.views=3", "model.integrator=rk4"],
+}
+VARIANTS.update(COST_VARIANTS)
+DEFAULT_COST = "cost-v3-i3000"
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
 # The representational fit: points on the moving surfaces (a seed other than the
 # evaluation's), Adam iterations and learning rate (decayed 100x, log-linearly).
@@ -91,7 +110,32 @@ def motion_scores(model, scene, max_time):
         moved, still = traj[split]["mean_distance"], traj[split]["static_mean_distance"]
         out[f"traj_{split}"] = moved
         out[f"traj_ratio_{split}"] = moved / still if moved is not None and still else None
+    out.update(acceleration_scores(model, scene, max_time))
     return out
+
+
+@torch.no_grad()
+def acceleration_scores(model, scene, max_time, times=MOTION_EVAL_TIMES):
+    """{"acc_observed", "acc_future"}: relative L2 error of the learned acceleration field
+    a(x, t) (VG-ACC, what the transport residual asks Dv/Dt to be) at the true positions of
+    the moving surface points, against the scene's material acceleration; means over the
+    observed and the future times. None without the affine velocity (nothing to compare)
+    or where the true acceleration vanishes."""
+    spec = model.spec
+    if spec.velocity != "affine":
+        return {"acc_observed": None, "acc_future": None}
+    x0 = moving_surface_points(scene)
+    params = model.motion.params()
+    rows = {"observed": [], "future": []}
+    for t in times:
+        x = scene.position(x0, t, margin=np.inf)
+        truth = scene.acceleration(x, t, margin=np.inf)
+        norm = np.linalg.norm(truth)
+        if norm == 0.0:
+            continue
+        learned = acceleration_field(params, torch.as_tensor(x, dtype=torch.float32), t, spec.config).numpy()
+        rows["observed" if t <= max_time else "future"].append(float(np.linalg.norm(learned - truth) / norm))
+    return {f"acc_{split}": float(np.mean(v)) if v else None for split, v in rows.items()}
 
 
 def fit_level(name, seed, overrides, all_times, max_time=0.75):
@@ -194,6 +238,7 @@ def rescore(record, cache):
 
 
 COLUMNS = [("vel_observed", "vel. err obs", "{:.3f}"), ("vel_future", "vel. err fut", "{:.3f}"),
+           ("acc_observed", "acc. err obs", "{:.3f}"), ("acc_future", "acc. err fut", "{:.3f}"),
            ("traj_ratio_observed", "traj/still obs", "{:.3f}"), ("traj_ratio_future", "traj/still fut", "{:.3f}"),
            ("interp_psnr", "interp dB", "{:.2f}"), ("extrap_psnr", "extrap dB", "{:.2f}"),
            ("frozen_psnr", "frozen dB", "{:.2f}"), ("wall_s", "wall s", "{:.0f}")]
@@ -216,13 +261,71 @@ def table(records):
     return "\n".join(lines)
 
 
+def pareto_front(costs, scores, sign):
+    """The (cost, score) pairs on the Pareto front, by increasing cost: each one scores better
+    (higher when sign = +1, lower when -1) than every cheaper one."""
+    front = []
+    for x, y in sorted(zip(costs, scores)):
+        if not front or sign * y > sign * front[-1][1]:
+            front.append((x, y))
+    return front
+
+
+def pareto_plot(records, path):
+    """Write `path` (PNG): extrapolation PSNR and future velocity error against training wall
+    time, one point per cost variant (mean over its seeds, bars: min-max), the runs on the
+    Pareto front joined. Returns the Markdown table of the plotted points."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = {}
+    for r in records:
+        # The defaults are one of the cost points: 3 views, 3000 iterations (velogauss.config).
+        variant = DEFAULT_COST if r["variant"] == "a" else r["variant"]
+        if variant in COST_VARIANTS and r["level"] == "full" and r["scene"] == "toss":
+            groups.setdefault(variant, []).append(r)
+    points = []
+    for variant, rows in sorted(groups.items()):
+        stats = {key: [float(r[key]) for r in rows] for key in ("wall_s", "extrap_psnr", "vel_future")}
+        points.append((variant, len(rows), stats))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    # sign: +1 where higher is better.
+    for ax, key, label, sign in ((axes[0], "extrap_psnr", "extrapolation PSNR (dB)", 1.0),
+                                 (axes[1], "vel_future", "future velocity rel. error", -1.0)):
+        xs = [np.mean(p[2]["wall_s"]) for p in points]
+        ys = [np.mean(p[2][key]) for p in points]
+        spread = [[y - min(p[2][key]) for y, p in zip(ys, points)], [max(p[2][key]) - y for y, p in zip(ys, points)]]
+        ax.errorbar(xs, ys, yerr=spread, fmt="o", capsize=3)
+        for x, y, p in zip(xs, ys, points):
+            ax.annotate(p[0].removeprefix("cost-"), (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        front = pareto_front(xs, ys, sign)
+        if front:
+            ax.plot(*zip(*front), "-", alpha=0.5)
+        ax.set_xlabel("training wall time (s, one thread)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    fig.suptitle("toss, full pipeline: accuracy against training time")
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    lines = ["| variant | seeds | wall s | extrap dB | vel. err fut |", "|---|---|---|---|---|"]
+    for variant, n, stats in points:
+        lines.append(f"| {variant} | {n} | " + " | ".join(
+            f"{np.mean(stats[k]):{f}} ({min(stats[k]):{f}}–{max(stats[k]):{f}})"
+            for k, f in (("wall_s", ".0f"), ("extrap_psnr", ".2f"), ("vel_future", ".3f"))) + " |")
+    return "\n".join(lines)
+
+
 def load_records(cache):
     return [json.loads(p.read_text()) for p in sorted((Path(cache) / "results").glob("*.json"))]
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m velogauss.bench.fidelity", description=__doc__.split("\n")[0])
-    parser.add_argument("command", choices=("run", "table", "rescore"))
+    parser.add_argument("command", choices=("run", "table", "rescore", "pareto"))
     parser.add_argument("--scenes", default="toss")
     parser.add_argument("--seeds", default="0")
     parser.add_argument("--levels", default="full")
@@ -230,6 +333,7 @@ def main(argv=None):
     parser.add_argument("--set", action="append", default=[], help="extra config override KEY=VALUE")
     parser.add_argument("--cache", default="runs/fidelity")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--plot", default="benchmarks/fidelity/pareto.png", help="where `pareto` writes its PNG")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.command == "run":
@@ -244,6 +348,9 @@ def main(argv=None):
     records = [r for r in load_records(args.cache) if _selected(r, args)]
     if args.command == "rescore":
         records = [rescore(r, args.cache) for r in records]
+    if args.command == "pareto":
+        print(pareto_plot(load_records(args.cache), args.plot))
+        return
     print(table(records))
 
 

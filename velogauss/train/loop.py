@@ -160,19 +160,24 @@ class _Loop:
         """One optimisation step; returns (loss, PSNR of the rendered view)."""
         cfg, model = self.cfg, self.model
         set_learning_rates(self.optimizer, it, cfg.train, self.extent)
-        index = self.sampler.sample(it, self.rng)
-        frame, gt = self.data.train[index], self.images[index]
+        indices = self.sampler.sample_views(it, self.rng, cfg.train.views)
+        frames = [self.data.train[i] for i in indices]
         spec = self.spec_at(it)
         motion_on = spec.moving and it >= cfg.train.warmup
         params = None
         if spec.moving:
             self.freeze_motion(it)
             params = model.motion.params()  # once per step: the render and the physics loss share it
-        means, quats, scales, base = model.state_at(frame.time, params, spec, self.carry_offset(it, spec))
-        image, _, meta = render_gaussians(model.with_appearance(means, quats, scales), frame.camera, self.background)
-        if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
-            meta["mean2d"].retain_grad()
-        loss = photometric_loss(image, gt)
+        # One state for all the views: they show the same time (sample_views).
+        means, quats, scales, base = model.state_at(frames[0].time, params, spec, self.carry_offset(it, spec))
+        gaussians = model.with_appearance(means, quats, scales)
+        renders, loss = [], 0.0
+        for frame, index in zip(frames, indices):
+            image, _, meta = render_gaussians(gaussians, frame.camera, self.background)
+            if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
+                meta["mean2d"].retain_grad()
+            loss = loss + photometric_loss(image, self.images[index]) / len(frames)
+            renders.append((image, meta, frame.camera))
         if motion_on and self.spec.adf_loss:
             loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
         if motion_on and spec.physics_loss:
@@ -181,12 +186,17 @@ class _Loop:
             loss = loss + cfg.train.lambda_carry * self.carry_loss(it, params, spec)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        grad = meta["mean2d"].grad
-        if grad is not None:
-            self.stats.add(grad.detach(), meta["radius"], meta["valid"], frame.camera.width, frame.camera.height)
+        for _, meta, camera in renders:
+            grad = meta["mean2d"].grad
+            if grad is not None:
+                # Each view's loss is weighted 1/len(frames); densification compares a view's
+                # own pixel gradient with its threshold, whatever the number of views per step.
+                self.stats.add(grad.detach() * len(frames), meta["radius"], meta["valid"], camera.width,
+                               camera.height)
         self.optimizer.step()
         with torch.no_grad():
-            frame_psnr = float(psnr(image.detach().clamp(0, 1), gt))
+            image = renders[0][0]
+            frame_psnr = float(psnr(image.detach().clamp(0, 1), self.images[indices[0]]))
         return float(loss.detach()), frame_psnr
 
     def spec_at(self, it):

@@ -3,7 +3,10 @@
 Frames follow a time curriculum: during the warm-up only the t = 0 frames (the canonical
 state) are drawn; then the window of allowed times opens linearly from 0 to `max_time`
 over `curriculum` iterations, so the velocity is learned from short integrations first.
-A scene without motion draws from every frame at once. Collocation points (VG-TRANSPORT,
+A scene without motion draws from every frame at once. An iteration may look at several
+training views of its frame's time (`train.views`): the Gaussians' state is computed once
+and seen by several cameras, which pins positions in depth, where one view's gradient is
+blind. Collocation points (VG-TRANSPORT,
 VG-DIV) are uniform over the scene box, grown by a margin, at one uniform time in [0, 1]
 per iteration: the future is constrained too.
 """
@@ -37,6 +40,16 @@ class FrameSampler:
         """One frame index allowed at `iteration`, uniformly among the allowed frames."""
         allowed = np.flatnonzero(self.times <= self.window(iteration) + 1e-9)
         return int(allowed[rng.integers(len(allowed))])
+
+    def sample_views(self, iteration, rng, views):
+        """Up to `views` frame indices of one time: `sample`'s frame first, then other frames
+        of exactly its time (other cameras), drawn without replacement. A static scene's
+        frames all show the one state, so any frames go together."""
+        first = self.sample(iteration, rng)
+        same = self.times == self.times[first] if self.moving else np.ones(len(self.times), dtype=bool)
+        others = np.flatnonzero(same & (np.arange(len(self.times)) != first))
+        extra = rng.choice(others, size=min(views - 1, len(others)), replace=False) if views > 1 else []
+        return [first, *(int(i) for i in extra)]
 
 
 def collocation_points(bounds, margin, n_points, rng, dtype, device):
