@@ -1,8 +1,14 @@
 """Input validation for the torch fast path (spec/conventions.md, "Bad input").
 
-The twin of `velogauss_core.checks.check_array` for tensors: bad input raises ValueError whose message
-starts with the argument's name. Checks run on the tensor's own device (no host copy of
-the data, one device sync for the finiteness flag) and never touch autograd.
+Two checks, both raising ValueError whose message starts with the argument's name:
+
+- `check_array`: type, shape and floating dtype, read from the tensor's metadata alone. Every
+  public function of `velogauss_fast` runs it; it never reads the data, so it costs no
+  device sync and works on the wrapped tensors of `torch.func.jvp`/`vmap`.
+- `check_finite`: NaN and inf, which needs the data: one host read of a flag computed on
+  the tensors' device (a device sync on CUDA). It runs only where data enters, gsplat's
+  way: `velogauss_fast.rasterize`, the model (`velogauss.model.dynamic`); the data loaders
+  check their NumPy arrays with `velogauss_core.checks`. Inner functions trust their callers.
 """
 
 import torch
@@ -11,11 +17,11 @@ from velogauss_core.checks import format_shape, shape_matches
 
 
 def check_array(name, x, shape=None):
-    """Raise ValueError unless `x` is a finite real floating tensor matching `shape`.
+    """Raise ValueError unless `x` is a real floating tensor matching `shape`; return `x`.
 
     `shape` is a `velogauss_core.checks.Shape`: a tuple of ints (exact size), None
-    (any size) and optionally "..." first (any leading batch dimensions).
-    Returns `x` unchanged so calls can be chained.
+    (any size) and optionally "..." first (any leading batch dimensions). The values are
+    not read (see `check_finite`).
     """
     if not isinstance(x, torch.Tensor):
         raise ValueError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
@@ -23,11 +29,21 @@ def check_array(name, x, shape=None):
         raise ValueError(f"{name}: expected shape {format_shape(shape)}, got {tuple(x.shape)}")
     if not x.is_floating_point():
         raise ValueError(f"{name}: expected a floating-point tensor, got dtype {x.dtype}")
+    return x
+
+
+def check_finite(**tensors):
+    """Raise ValueError naming the first of `tensors` (name=tensor, floating tensors on one
+    device, already through `check_array`) that holds a NaN or an inf.
+
+    One host read for all of them, whatever their number: the device sync of a boundary.
+    """
     # x * 0 is 0 where x is finite and NaN where it is inf or NaN, so one product and one
     # sum (exact: a sum of zeros) test every entry; on big inputs that is several times
     # cheaper than isfinite().all(), whose comparisons run once per input of each call.
-    if bool(torch.isnan((x.detach() * 0).sum())):
-        bad = int((~torch.isfinite(x.detach())).sum())
-        raise ValueError(f"{name}: contains {bad} non-finite value(s) (NaN or inf)")
-    return x
-
+    flags = torch.stack([(x.detach() * 0).sum().isnan() for x in tensors.values()])
+    if not bool(flags.any()):
+        return
+    name, x = next((name, x) for (name, x), bad in zip(tensors.items(), flags.tolist()) if bad)
+    bad = int((~torch.isfinite(x.detach())).sum())
+    raise ValueError(f"{name}: contains {bad} non-finite value(s) (NaN or inf)")

@@ -40,7 +40,7 @@ from torch import Tensor
 from velogauss_core.checks import check_degree, check_size
 from velogauss_core.constants import TRANSMITTANCE_MIN
 from velogauss_fast.backends import gsplat_available, numba_available
-from velogauss_fast.checks import check_array
+from velogauss_fast.checks import check_array, check_finite
 from velogauss_fast.composite import Composite, alpha_from_offsets, composite_autograd
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
@@ -119,7 +119,8 @@ def rasterize(
     "n_pairs" the number of (Gaussian, pixel) pairs composited. meta["mean2d"] is part of
     the autograd graph: call meta["mean2d"].retain_grad() before backward to read the
     screen-space gradient used for densification.
-    Invalid input raises ValueError naming the argument. N = 0 renders the background.
+    Invalid input (a bad shape, dtype or device, a NaN or an inf) raises ValueError naming
+    the argument. N = 0 renders the background.
     """
     if backend not in _BACKENDS:
         raise ValueError(f"backend: expected one of {_BACKENDS}, got {backend!r}")
@@ -148,6 +149,10 @@ def rasterize(
         if t.dtype != means.dtype or t.device != means.device:
             raise ValueError(f"{name}: expected {means.dtype} on {means.device} like means, "
                              f"got {t.dtype} on {t.device}")
+    # Finiteness is tested here, where the data enters, in one device sync for all eight
+    # tensors; the functions below check shapes only (spec/conventions.md, "Bad input").
+    check_finite(means=means, quats=quats, scales=scales, opacities=opacities, colors=colors, viewmat=viewmat, K=K,
+                 background=background)
 
     if backend == "auto":
         backend = ("gsplat" if gsplat_available(means.device)

@@ -125,3 +125,38 @@ def test_model_rejects_motion_that_does_not_match_its_spec():
     means, quats, _, base = static.state_at(0.7)
     assert torch.equal(means, gaussians.means) and torch.equal(base, gaussians.means)
     assert torch.equal(static.velocity_at(x0, 0.2), torch.zeros_like(x0))
+
+
+@pytest.mark.parametrize("t", [float("nan"), float("inf"), torch.tensor(float("nan")), torch.zeros(2), "0.5"])
+def test_model_refuses_a_bad_time_where_it_enters(t):
+    # The model is a door (spec/conventions.md, "Bad input"): finiteness is checked here, once,
+    # and the fast functions inside check shapes only. A static model refuses it too.
+    x0, _, _ = _canonical()
+    gaussians = Gaussians.from_points(x0.numpy(), None, 0, 0.1)
+    spec = _spec("full")
+    for model in (VeloGaussModel(gaussians, MotionParameters(spec, np.random.default_rng(0)), spec),
+                  VeloGaussModel(gaussians, None, _spec("full", STATIC))):
+        for call in (model.state_at, model.gaussians_at, model.tracked_positions,
+                     lambda t: model.velocity_at(x0, t), lambda t: model.particle_velocity(x0, x0, t)):
+            with pytest.raises(ValueError, match="^t:"):
+                call(t)
+
+
+def test_model_refuses_bad_points_where_they_enter():
+    x0, _, _ = _canonical()
+    spec = _spec("full")
+    model = VeloGaussModel(Gaussians.from_points(x0.numpy(), None, 0, 0.1),
+                           MotionParameters(spec, np.random.default_rng(0)), spec)
+    poisoned = x0.clone()
+    poisoned[3, 1] = float("nan")
+    with pytest.raises(ValueError, match=r"^x: contains 1 non-finite"):
+        model.velocity_at(poisoned, 0.2)
+    with pytest.raises(ValueError, match="^x: expected shape"):
+        model.velocity_at(x0[:, :2], 0.2)
+    with pytest.raises(ValueError, match=r"^x0: contains 1 non-finite"):
+        model.particle_velocity(poisoned, x0, 0.2)
+    with pytest.raises(ValueError, match=r"^x: contains 1 non-finite"):
+        model.particle_velocity(x0, poisoned, 0.2)
+    with pytest.raises(ValueError, match="^x: expected shape"):
+        model.particle_velocity(x0, x0[:5], 0.2)
+    assert torch.isfinite(model.velocity_at(x0, torch.tensor(0.2))).all()  # a finite 0-d tensor time passes

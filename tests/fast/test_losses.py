@@ -74,7 +74,6 @@ def test_physics_loss_gradcheck(device):
         ((torch.zeros(4, 4), torch.zeros(4, 4, 3)), "pred"),
         ((torch.zeros(12, 12, 3), torch.zeros(12, 13, 3)), "gt"),
         ((torch.zeros(10, 12, 3), torch.zeros(10, 12, 3)), "pred"),
-        ((torch.zeros(12, 12, 3), torch.full((12, 12, 3), float("nan"))), "gt"),
     ],
 )
 def test_photometric_bad_input_names_the_argument(args, name):
@@ -87,9 +86,8 @@ def test_photometric_bad_input_names_the_argument(args, name):
     [
         (torch.zeros(3, 2), None, 0.1, 0.1, "r"),
         (np.zeros((3, 3)), None, 0.1, 0.1, "r"),
-        (torch.tensor([[0.0, float("inf"), 0.0]]), None, 0.1, 0.1, "r"),
         (torch.zeros(3, 3), torch.zeros(2), 0.1, 0.1, "div"),
-        (torch.zeros(3, 3), torch.tensor([0.0, float("nan"), 0.0]), 0.1, 0.1, "div"),
+        (torch.zeros(3, 3), torch.zeros(3, dtype=torch.int64), 0.1, 0.1, "div"),
         (torch.zeros(3, 3), None, -0.1, 0.1, "lambda_transport"),
         (torch.zeros(3, 3), None, 0.1, float("inf"), "lambda_div"),
     ],

@@ -188,10 +188,9 @@ def _args(**changes):
     "args, name",
     [
         (_args(means=torch.zeros(2, 2)), "means"),
-        (_args(means=torch.tensor([[0.0, 0.0, float("nan")]] * 2)), "means"),
         (_args(Sigma=torch.eye(3).expand(3, 3, 3)), "Sigma"),
         (_args(viewmat=torch.eye(3)), "viewmat"),
-        (_args(viewmat=torch.full((4, 4), float("inf"))), "viewmat"),
+        (_args(viewmat=torch.eye(4, dtype=torch.int64)), "viewmat"),
         (_args(K=torch.eye(4)), "K"),
         (_args(width=0), "width"),
         (_args(height=4.0), "height"),

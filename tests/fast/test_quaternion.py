@@ -97,10 +97,9 @@ def test_quat_multiply_gradcheck(device):
     "fn, args, name",
     [
         (quat_to_rotmat, (torch.zeros(3, 3),), "q"),
-        (quat_to_rotmat, (torch.tensor([[1.0, float("nan"), 0.0, 0.0]]),), "q"),
         (quat_to_rotmat, (np.ones((2, 4)),), "q"),
         (quat_multiply, (torch.ones(2, 4), torch.ones(2, 5)), "b"),
-        (quat_multiply, (torch.full((4,), float("inf")), torch.ones(4)), "a"),
+        (quat_multiply, (torch.ones(3), torch.ones(4)), "a"),
     ],
 )
 def test_bad_input_names_the_argument(fn, args, name):

@@ -271,6 +271,8 @@ def _poisoned(name, bad):
     return args
 
 
+# rasterize is the renderer's door: the one place a NaN or an inf in any of its tensors is
+# refused (spec/conventions.md, "Bad input"); the functions it calls check shapes only.
 BAD_INPUTS = [
     *[(_poisoned(name, bad), name) for name in ("means", "quats", "scales", "opacities", "colors", "viewmat", "K",
                                                 "background") for bad in (float("nan"), float("inf"))],

@@ -7,6 +7,10 @@ VG-ADF-COMPOSE). Only the particles flagged `moving` are integrated and deformed
 others are rendered at their canonical state, so the cost of motion grows with the moving
 part of the scene. Under scheme "adf-step" (VG-CARRY) the ADF's state at a start time is
 carried to t by the velocity instead.
+
+The model is a door of the fast path (spec/conventions.md, "Bad input"): the times and
+points its public methods take from outside are checked here, finiteness included; what it
+hands to `velogauss_fast` inside is then checked for shape only.
 """
 
 import torch
@@ -14,6 +18,8 @@ from torch import nn
 
 from velogauss.model import motion as motion_fns
 from velogauss.model.spec import MotionSpec
+from velogauss_fast.checks import check_array, check_finite
+from velogauss_fast.motion.scalars import check_time
 from velogauss_fast.quaternion import normalize_quat
 from velogauss_fast.raster import rasterize
 
@@ -53,7 +59,9 @@ class VeloGaussModel(nn.Module):
         params: the motion parameter dict, when the caller already built it this step;
         spec: a variant of the model's spec (training skips the ADF before it learns);
         offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY).
+        A non-finite or non-scalar t raises ValueError.
         """
+        _check_time(t)
         spec = self.spec if spec is None else spec
         g = self.gaussians
         x0, q0, s0 = g.means, normalize_quat(g.quats), g.scales
@@ -93,7 +101,10 @@ class VeloGaussModel(nn.Module):
         return base if self.has_velocity else means
 
     def velocity_at(self, x, t):
-        """Learned Eulerian velocity (M, 3) at world points x (M, 3); zero without a velocity model."""
+        """Learned Eulerian velocity (M, 3) at world points x (M, 3); zero without a velocity model.
+        A non-finite or wrongly shaped x, or a bad t, raises ValueError."""
+        check_finite(x=check_array("x", x, (None, 3)))
+        _check_time(t)
         if not self.has_velocity:
             return torch.zeros_like(x)
         return motion_fns.velocity_at(self.motion.params(), self.spec, x, t)
@@ -101,7 +112,10 @@ class VeloGaussModel(nn.Module):
     def particle_velocity(self, x0, x, t):
         """Velocity (M, 3) the model gives the material points that started at x0 (M, 3) when
         they are at x (M, 3) at time t (`velogauss.model.motion.particle_velocity`); zero
-        without a velocity model."""
+        without a velocity model. Non-finite or wrongly shaped points, or a bad t, raise ValueError."""
+        check_array("x0", x0, (None, 3))
+        check_finite(x0=x0, x=check_array("x", x, tuple(x0.shape)))
+        _check_time(t)
         if not self.has_velocity:
             return torch.zeros_like(x)
         return motion_fns.particle_velocity(self.motion.params(), self.spec, x0, x, t)
@@ -109,6 +123,14 @@ class VeloGaussModel(nn.Module):
     def set_moving(self, moving):
         """Flag which particles are integrated (bool (N,))."""
         self.moving = moving.to(device=self.moving.device, dtype=torch.bool)
+
+
+def _check_time(t):
+    """Raise ValueError unless t is a finite real number or a finite 0-d float tensor: a
+    number costs nothing to test, a tensor one device sync, once per call of the model."""
+    check_time("t", t)
+    if isinstance(t, torch.Tensor):
+        check_finite(t=t)
 
 
 def render_gaussians(g, camera, background):

@@ -13,13 +13,16 @@ import torch
 
 
 def check_time(name, t):
-    """Raise ValueError unless `t` is a finite real scalar (number or 0-d float tensor); return it."""
+    """Raise ValueError unless `t` is a finite real number or a 0-d float tensor; return it.
+
+    A number's finiteness costs nothing to test; a tensor's would be a device sync, so, as
+    for `velogauss_fast.checks.check_array`, only its shape and dtype are checked here and
+    its values where it enters (`velogauss_fast.checks.check_finite`, in the model).
+    """
     if isinstance(t, torch.Tensor):
         if t.dim() != 0 or not t.is_floating_point():
             raise ValueError(f"{name}: expected a finite real scalar, got a tensor of shape "
                              f"{tuple(t.shape)} and dtype {t.dtype}")
-        if not bool(torch.isfinite(t.detach())):
-            raise ValueError(f"{name}: expected a finite real scalar, got {t.item()!r}")
         return t
     if isinstance(t, bool) or not isinstance(t, numbers.Real) or not math.isfinite(t):
         raise ValueError(f"{name}: expected a finite real scalar, got {t!r}")

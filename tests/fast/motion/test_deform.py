@@ -100,4 +100,4 @@ def test_rejects_bad_input():
     with pytest.raises(ValueError, match="^dq"):
         compose_state(x0.float(), q, torch.ones(3, 3), torch.zeros(3, 3), torch.ones(2, 4), torch.zeros(3, 3))
     with pytest.raises(ValueError, match="^ds"):
-        compose_state(x0.float(), q, torch.ones(3, 3), torch.zeros(3, 3), q, torch.full((3, 3), float("inf")))
+        compose_state(x0.float(), q, torch.ones(3, 3), torch.zeros(3, 3), q, torch.zeros(3, 4))

@@ -80,4 +80,4 @@ def test_rejects_bad_input():
     with pytest.raises(ValueError, match="^w"):
         rotscale_rates(torch.zeros(3, 4), torch.zeros(2, 12))
     with pytest.raises(ValueError, match="^w"):
-        rotscale_rates(torch.zeros(1, 4), torch.full((1, 12), float("nan")))
+        rotscale_rates(torch.zeros(1, 4), torch.zeros(1, 12, dtype=torch.int64))

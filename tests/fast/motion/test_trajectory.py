@@ -157,7 +157,7 @@ def test_rejects_bad_input():
     params = to_torch(random_params(0, cfg), torch.float64, "cpu")
     x0, q0, s0, z = (torch.tensor(a) for a in _state(np.random.default_rng(0), 3, cfg))
     with pytest.raises(ValueError, match="^s0"):
-        base_state(params, x0, q0, -s0, z, 0.5, 0.1, "rk2", cfg)
+        base_state(params, x0, q0, s0[:, :2], z, 0.5, 0.1, "rk2", cfg)
     with pytest.raises(ValueError, match="^q0"):
         base_state(params, x0, q0[:2], s0, z, 0.5, 0.1, "rk2", cfg)
     with pytest.raises(ValueError, match="^z"):

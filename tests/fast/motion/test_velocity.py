@@ -75,7 +75,7 @@ def test_rejects_bad_input():
     with pytest.raises(ValueError, match="^t"):
         velocity_field(params, torch.zeros(2, 3, dtype=torch.float64), float("inf"), cfg)
     with pytest.raises(ValueError, match="^x"):
-        velocity_field(params, torch.full((2, 3), float("nan"), dtype=torch.float64), 0.0, cfg)
+        velocity_field(params, torch.zeros(2, 4, dtype=torch.float64), 0.0, cfg)
 
 
 @pytest.mark.spec("VG-VEL-MLP")

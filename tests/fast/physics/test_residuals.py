@@ -137,7 +137,7 @@ def test_rejects_bad_input(fn):
     with pytest.raises(ValueError, match="^x"):
         fn(params, torch.zeros(2, 4, dtype=torch.float64), 0.1, cfg)
     with pytest.raises(ValueError, match="^x"):
-        fn(params, torch.full((2, 3), float("nan"), dtype=torch.float64), 0.1, cfg)
+        fn(params, torch.zeros(2, 3, dtype=torch.int64), 0.1, cfg)
     with pytest.raises(ValueError, match="^t"):
         fn(params, torch.zeros(2, 3, dtype=torch.float64), float("nan"), cfg)
 
