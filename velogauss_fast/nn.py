@@ -1,9 +1,8 @@
 """Positional encoding and plain MLPs, in torch.
 
-Twin of `velogauss_ref.nn` (spec/motion.md, VG-ENC and VG-MLP). Each public function
-validates its input and calls an unchecked kernel (`_encode`, `_mlp`); the kernels are what
-the physics residuals run under `torch.func.jvp`/`vmap`, where a data-dependent validity
-check (`bool(tensor)`) is not allowed.
+Twin of `velogauss_ref.nn` (spec/motion.md, VG-ENC and VG-MLP). Their checks read shapes
+and dtypes only (`velogauss_fast.checks.check_array`), so the motion calls them everywhere,
+under `torch.func.jvp`/`vmap` too.
 """
 
 import math
@@ -23,7 +22,13 @@ def positional_encoding(x, n_freqs):
     check_array("x", x, ("...", None))
     if isinstance(n_freqs, bool) or not isinstance(n_freqs, int) or n_freqs < 0:
         raise ValueError(f"n_freqs: expected a non-negative int, got {n_freqs!r}")
-    return _encode(x, n_freqs)
+    if n_freqs == 0:
+        return x
+    # 2^k pi is exact times pi, so (2^k pi) x rounds exactly like the reference's 2^k (pi x).
+    freqs = torch.tensor([2.0**k * math.pi for k in range(n_freqs)], dtype=x.dtype, device=x.device)
+    angles = x[..., None, :] * freqs[:, None]  # [..., n_freqs, D]
+    sincos = torch.stack([torch.sin(angles), torch.cos(angles)], dim=-2)  # [..., n_freqs, 2, D]
+    return torch.cat([x, sincos.flatten(-3)], dim=-1)
 
 
 def mlp(layers, x):
@@ -41,20 +46,6 @@ def mlp(layers, x):
                 f"layers[{k}].W: expected {layers[k - 1][0].shape[1]} input rows, got {W.shape[0]}"
             )
     check_array("x", x, ("...", layers[0][0].shape[0]))
-    return _mlp(layers, x)
-
-
-def _encode(x, n_freqs):
-    if n_freqs == 0:
-        return x
-    # 2^k pi is exact times pi, so (2^k pi) x rounds exactly like the reference's 2^k (pi x).
-    freqs = torch.tensor([2.0**k * math.pi for k in range(n_freqs)], dtype=x.dtype, device=x.device)
-    angles = x[..., None, :] * freqs[:, None]  # [..., n_freqs, D]
-    sincos = torch.stack([torch.sin(angles), torch.cos(angles)], dim=-2)  # [..., n_freqs, 2, D]
-    return torch.cat([x, sincos.flatten(-3)], dim=-1)
-
-
-def _mlp(layers, x):
     h = x
     for W, b in layers[:-1]:
         h = F.silu(h @ W + b)

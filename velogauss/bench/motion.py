@@ -40,7 +40,7 @@ from velogauss.bench.harness import machine, peak_above_mib, regenerate_command,
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
-from velogauss_fast.motion.velocity import _velocity_field
+from velogauss_fast.motion.velocity import velocity_field
 from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.physics.residuals import physics_residuals
 from velogauss_core.motion import init_motion_params, MotionConfig
@@ -74,10 +74,10 @@ def reverse_mode_residuals(params, x, t, cfg):
     t = torch.as_tensor(t, dtype=x.dtype, device=x.device)
 
     def v_point(xp, tp):
-        return _velocity_field(params, xp[None], tp, cfg)[0]
+        return velocity_field(params, xp[None], tp, cfg)[0]
 
     grad_v, dv_dt = vmap(jacrev(v_point, argnums=(0, 1)), in_dims=(0, None))(x, t)
-    v = _velocity_field(params, x, t, cfg)
+    v = velocity_field(params, x, t, cfg)
     r = dv_dt + (grad_v * v[:, None, :]).sum(-1) - acceleration_field(params, x, t, cfg)
     return r, grad_v.diagonal(dim1=-2, dim2=-1).sum(-1)
 
@@ -104,11 +104,12 @@ def _shifted(params, rng, scale=0.1):
     return params + rng.normal(scale=scale, size=np.shape(params))
 
 
-def _leaves(params):
+def leaves(params):
+    """The tensors of a motion parameter dict (nested dicts, lists and tuples), in a fixed order."""
     if isinstance(params, dict):
-        return [t for v in params.values() for t in _leaves(v)]
+        return [t for v in params.values() for t in leaves(v)]
     if isinstance(params, (list, tuple)):
-        return [t for v in params for t in _leaves(v)]
+        return [t for v in params for t in leaves(v)]
     return [params]
 
 
@@ -128,7 +129,7 @@ def _workload(case, device, sizes):
     """The zero-argument function that one timed pass of `case` at `sizes` calls."""
     backward = case.endswith("fwdbwd")
     params, cfg = _params(torch.float32, device, requires_grad=backward)
-    leaves = _leaves(params)
+    tensors = leaves(params)
     g = torch.Generator().manual_seed(2)
     if case.startswith("trajectory"):
         n = sizes.n_particles
@@ -136,7 +137,7 @@ def _workload(case, device, sizes):
         q0 = torch.randn(n, 4, generator=g).to(device).requires_grad_(backward)
         s0 = (0.005 + 0.05 * torch.rand(n, 3, generator=g)).to(device).requires_grad_(backward)
         cot = [torch.randn(n, k, generator=g).to(device) for k in (3, 4, 3)]
-        leaves += [x0, q0, s0]
+        tensors += [x0, q0, s0]
         h = _step_size(sizes.n_steps)
 
         def forward():
@@ -157,7 +158,7 @@ def _workload(case, device, sizes):
             return (r * r).sum(-1).mean() + (div * div).mean()
 
     def step():
-        for leaf in leaves:
+        for leaf in tensors:
             leaf.grad = None
         if backward:
             loss(forward()).backward()

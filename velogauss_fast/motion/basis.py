@@ -33,10 +33,6 @@ def affine_from_coefficients(w):
     omega = (w4, w5, w6), its trace w7 + w8 + w9 the divergence; shear is symmetric, trace-free.
     """
     check_array("w", w, ("...", 12))
-    return _affine(w)
-
-
-def _affine(w):
     (w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11, w12) = w.unbind(-1)
     A = torch.stack(
         [

@@ -4,7 +4,7 @@ Twin of `velogauss_ref.motion.code` (spec/motion.md, VG-CODE).
 """
 
 from velogauss_fast.checks import check_array
-from velogauss_fast.nn import _encode, _mlp
+from velogauss_fast.nn import mlp, positional_encoding
 
 
 def physics_code(params, x0, cfg):
@@ -14,8 +14,4 @@ def physics_code(params, x0, cfg):
     cfg: MotionConfig (gamma with cfg.n_freqs_x frequencies) -> z: (N, cfg.code_dim).
     """
     check_array("x0", x0, (None, 3))
-    return _code(params, x0, cfg)
-
-
-def _code(params, x, cfg):
-    return _mlp(params["code"], _encode(x, cfg.n_freqs_x))
+    return mlp(params["code"], positional_encoding(x0, cfg.n_freqs_x))

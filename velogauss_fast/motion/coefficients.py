@@ -9,7 +9,7 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.scalars import check_time, time_tensor
-from velogauss_fast.nn import _encode, _mlp
+from velogauss_fast.nn import mlp, positional_encoding
 
 
 def coefficients(params, t, z, cfg):
@@ -21,10 +21,6 @@ def coefficients(params, t, z, cfg):
     """
     check_time("t", t)
     check_array("z", z, (None, params["mix"][0][0].shape[0]))
-    return _coefficients(params, t, z, cfg)
-
-
-def _coefficients(params, t, z, cfg):
     return masked(mixing_weights(params, z) @ motion_patterns(params, t, cfg), cfg.mask)
 
 
@@ -42,7 +38,7 @@ def motion_patterns(params, t, cfg):
 
 def motion_patterns_at(params, times, cfg):
     """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them."""
-    out = _mlp(params["time"], _encode(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
+    out = mlp(params["time"], positional_encoding(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
     return out.reshape(times.shape[0], -1, 12)
 
 

@@ -8,7 +8,7 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.scalars import check_time, time_tensor
-from velogauss_fast.nn import _encode, _mlp
+from velogauss_fast.nn import mlp, positional_encoding
 from velogauss_fast.quaternion import normalize_quat, quat_multiply
 
 
@@ -22,8 +22,8 @@ def adf_residual(params, x0, t, z, cfg):
     check_array("x0", x0, (None, 3))
     check_array("z", z, (x0.shape[0], None))
     check_time("t", t)
-    gt = _encode(time_tensor(t, x0), cfg.n_freqs_adf_t).expand(x0.shape[0], -1)
-    o = _mlp(params["adf"], torch.cat([_encode(x0, cfg.n_freqs_adf_x), gt, z], dim=-1))
+    gt = positional_encoding(time_tensor(t, x0), cfg.n_freqs_adf_t).expand(x0.shape[0], -1)
+    o = mlp(params["adf"], torch.cat([positional_encoding(x0, cfg.n_freqs_adf_x), gt, z], dim=-1))
     identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=o.dtype, device=o.device)
     return o[:, 0:3], identity + o[:, 3:7], o[:, 7:10]
 

@@ -1,8 +1,9 @@
 """Constant tensors that turn the particle rates of VG-TRAJ into a few matrix products.
 
 spec/motion.md, VG-BASIS, VG-ROTSCALE; spec/rendering.md, VG-QUAT. Every table here is
-derived from the spec functions themselves (`_affine` of VG-BASIS, `quat_multiply` of
-VG-QUAT-MUL) applied to unit vectors, never written out by hand, so it cannot drift from them.
+derived from the spec functions themselves (`affine_from_coefficients` of VG-BASIS,
+`quat_multiply` of VG-QUAT-MUL) applied to unit vectors, never written out by hand, so it
+cannot drift from them.
 
 The linear part of a particle's state is u = [x (3) | 1 | q (4)] (the slots below). Its
 rates are linear in u with a matrix linear in the coefficients w (VG-VEL, VG-ROTSCALE):
@@ -17,7 +18,7 @@ import functools
 
 import torch
 
-from velogauss_fast.motion.basis import _affine
+from velogauss_fast.motion.basis import affine_from_coefficients
 from velogauss_fast.quaternion import quat_multiply
 from velogauss_core.motion import COLUMN_GROUPS
 from velogauss_core.motion import N_BASIS
@@ -50,7 +51,7 @@ def strain_generator(columns, dtype, device):
     `columns`. The rotation columns' D(e_j) is zero (their A is antisymmetric), so only
     stretch and shear columns need be passed. Cached; never modified.
     """
-    A, _ = _affine(torch.eye(N_BASIS, dtype=torch.float64)[list(columns)])
+    A, _ = affine_from_coefficients(torch.eye(N_BASIS, dtype=torch.float64)[list(columns)])
     return (0.5 * (A + A.transpose(1, 2))).reshape(len(columns), 9).T.contiguous().to(dtype=dtype, device=device)
 
 
@@ -76,7 +77,7 @@ def rotmat_form(dtype, device):
 def _full_generators():
     """G (12, 8, 8) in float64: G_j acting on u = [x | 1 | q], for every VG-BASIS column j."""
     eye = torch.eye(N_BASIS, dtype=torch.float64)
-    A, b = _affine(eye)  # column j of Phi as the affine map x -> A(e_j) x + b(e_j)
+    A, b = affine_from_coefficients(eye)  # column j of Phi as the affine map x -> A(e_j) x + b(e_j)
     omega = eye[:, list(COLUMN_GROUPS["rotation"])]  # omega(e_j) = (w4, w5, w6) of e_j
     pure = torch.cat([torch.zeros(N_BASIS, 1, dtype=torch.float64), 0.5 * omega], dim=1)
     # Q_j[:, k] = 1/2 (0, omega(e_j)) (x) e_k: left multiplication as a matrix.

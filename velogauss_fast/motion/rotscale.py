@@ -18,10 +18,6 @@ def rotscale_rates(q, w):
     """
     check_array("q", q, (None, 4))
     check_array("w", w, (q.shape[0], 12))
-    return _rotscale_rates(q, w)
-
-
-def _rotscale_rates(q, w):
     # base_state's per-stage kernels (velogauss_fast.motion.rates) on component-major views.
     _, omega, w_strain = w.T.split([len(cols) for cols in GROUP_COLUMNS.values()])
     T = block_generator(GROUP_COLUMNS["rotation"], ("q",), ("q",), q.dtype, q.device)

@@ -6,22 +6,26 @@ Twin of `velogauss_ref.motion.velocity` (spec/motion.md, VG-VEL, VG-FIELD and VG
 import torch
 
 from velogauss_fast.checks import check_array
-from velogauss_fast.motion.basis import _affine
-from velogauss_fast.motion.code import _code
-from velogauss_fast.motion.coefficients import _coefficients
+from velogauss_fast.motion.basis import affine_from_coefficients
+from velogauss_fast.motion.code import physics_code
+from velogauss_fast.motion.coefficients import coefficients
 from velogauss_fast.motion.scalars import check_time, time_tensor
-from velogauss_fast.nn import _encode, _mlp
+from velogauss_fast.nn import mlp, positional_encoding
 
 
 def velocity(x, w):
     """v = Phi(x) w = A(w) x + b(w) (VG-VEL).
 
-    x: (N, 3) positions; w: (N, 12) coefficients -> v: (N, 3), world units per unit time.
-    Evaluated in affine form (no (N, 3, 12) basis tensor is built).
+    x: (N, 3) positions; w: (..., N, 12) coefficients -> v: (..., N, 3), world units per
+    unit time. Leading dimensions of w are batch dimensions over the same points (the
+    residuals pass one coefficient set per axis). Evaluated in affine form (no (N, 3, 12)
+    basis tensor is built).
     """
     check_array("x", x, (None, 3))
-    check_array("w", w, (x.shape[0], 12))
-    return _velocity(x, w)
+    check_array("w", w, ("...", x.shape[0], 12))
+    A, b = affine_from_coefficients(w)
+    # Elementwise products and a 3-term sum beat a batched 3x3 matmul for large N.
+    return (A * x[..., None, :]).sum(-1) + b
 
 
 def velocity_field(params, x, t, cfg):
@@ -32,17 +36,7 @@ def velocity_field(params, x, t, cfg):
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    return _velocity_field(params, x, t, cfg)
-
-
-def _velocity(x, w):
-    A, b = _affine(w)
-    # Elementwise products and a 3-term sum beat a batched 3x3 matmul for large N.
-    return (A * x[..., None, :]).sum(-1) + b
-
-
-def _velocity_field(params, x, t, cfg):
-    return _velocity(x, _coefficients(params, t, _code(params, x, cfg), cfg))
+    return velocity(x, coefficients(params, t, physics_code(params, x, cfg), cfg))
 
 
 def mlp_velocity(params, x, t, cfg):
@@ -54,9 +48,5 @@ def mlp_velocity(params, x, t, cfg):
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    return _mlp_velocity(params, x, time_tensor(t, x).reshape(1, 1).expand(x.shape[0], 1), cfg)
-
-
-def _mlp_velocity(params, x, t_col, cfg):
-    """`mlp_velocity` at x (N, 3) with one time per point, t_col (N, 1)."""
-    return _mlp(params["velocity_mlp"], torch.cat([_encode(x, cfg.n_freqs_x), t_col], dim=-1))
+    t_col = time_tensor(t, x).reshape(1, 1).expand(x.shape[0], 1)
+    return mlp(params["velocity_mlp"], torch.cat([positional_encoding(x, cfg.n_freqs_x), t_col], dim=-1))

@@ -4,10 +4,10 @@ Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC).
 """
 
 from velogauss_fast.checks import check_array
-from velogauss_fast.motion.code import _code
+from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import masked, mixing_weights
 from velogauss_fast.motion.scalars import check_time
-from velogauss_fast.motion.velocity import _velocity
+from velogauss_fast.motion.velocity import velocity
 
 
 def acceleration_field(params, x, t, cfg):
@@ -21,16 +21,22 @@ def acceleration_field(params, x, t, cfg):
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    return _acceleration(params, x, t, mixing_weights(params, _code(params, x, cfg)), cfg)
+    m = mixing_weights(params, physics_code(params, x, cfg))
+    return velocity(x, acceleration_coefficients(params, t, m, cfg))
 
 
-def _acceleration(params, x, t, m, cfg):
-    """a at x for mixing weights m (N, K) already evaluated at x."""
-    return _velocity(x, masked(m @ _acc_patterns(params["acc"], t), cfg.acc_mask))
+def acceleration_coefficients(params, t, m, cfg):
+    """alpha = m sum_d Q_d t^d (N, 12), masked by cfg.acc_mask, for mixing weights m (N, K)
+    (VG-ACC): the coefficients `acceleration_field` applies Phi(x) to, for callers that
+    already hold m at the points (the physics residuals share it with the velocity)."""
+    check_time("t", t)
+    check_array("m", m, (None, params["acc"].shape[1]))
+    return masked(m @ acceleration_patterns(params["acc"], t), cfg.acc_mask)
 
 
-def _acc_patterns(Q, t):
-    """sum_d Q_d t^d (K, 12) by Horner's rule."""
+def acceleration_patterns(Q, t):
+    """sum_d Q_d t^d: Q (D + 1, K, 12) -> (K, 12), the acceleration of each motion pattern,
+    by Horner's rule."""
     out = Q[-1]
     for Qd in Q.flip(0)[1:]:
         out = out * t + Qd

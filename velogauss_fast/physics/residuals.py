@@ -18,12 +18,12 @@ import torch
 from torch.func import jvp, vmap
 
 from velogauss_fast.checks import check_array
-from velogauss_fast.motion.basis import _affine
-from velogauss_fast.motion.code import _code
+from velogauss_fast.motion.basis import affine_from_coefficients
+from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import masked, mixing_weights, motion_patterns
 from velogauss_fast.motion.scalars import check_time, time_tensor
-from velogauss_fast.motion.velocity import _mlp_velocity, _velocity
-from velogauss_fast.physics.acceleration import _acceleration, acceleration_field
+from velogauss_fast.motion.velocity import mlp_velocity, velocity
+from velogauss_fast.physics.acceleration import acceleration_coefficients, acceleration_field
 
 
 def transport_residual(params, x, t, cfg):
@@ -39,12 +39,12 @@ def transport_residual(params, x, t, cfg):
     m_of_x = _mixing_of_x(params, cfg)
     m = m_of_x(x)
     w = masked(m @ P, cfg.mask)
-    v = _velocity(x, w)
+    v = velocity(x, w)
     _, dm_v = jvp(m_of_x, (x,), (v,))  # d m / d x along v, [N, K]
-    A, _ = _affine(w)
-    grad_v_v = (A * v[:, None, :]).sum(-1) + _velocity(x, masked(dm_v @ P, cfg.mask))
-    dv_dt = _velocity(x, masked(m @ dP_dt, cfg.mask))
-    return dv_dt + grad_v_v - _acceleration(params, x, t, m, cfg)
+    A, _ = affine_from_coefficients(w)
+    grad_v_v = (A * v[:, None, :]).sum(-1) + velocity(x, masked(dm_v @ P, cfg.mask))
+    dv_dt = velocity(x, masked(m @ dP_dt, cfg.mask))
+    return dv_dt + grad_v_v - velocity(x, acceleration_coefficients(params, t, m, cfg))
 
 
 def divergence(params, x, t, cfg):
@@ -69,7 +69,7 @@ def physics_residuals(params, x, t, cfg):
     check_array("x", x, (None, 3))
     check_time("t", t)
     v, dv_dt, grad_v, m = _velocity_jet(params, x, t, cfg)
-    r = dv_dt + (grad_v * v[:, None, :]).sum(-1) - _acceleration(params, x, t, m, cfg)
+    r = dv_dt + (grad_v * v[:, None, :]).sum(-1) - velocity(x, acceleration_coefficients(params, t, m, cfg))
     return r, grad_v.diagonal(dim1=-2, dim2=-1).sum(-1)
 
 
@@ -82,18 +82,18 @@ def _velocity_jet(params, x, t, cfg):
     # tangents dm/dx_j (3, N, K) together.
     m, dm_dx = vmap(lambda e: jvp(m_of_x, (x,), (e,)), out_dims=(None, 0))(axes)
     w = masked(m @ P, cfg.mask)
-    A, _ = _affine(w)
+    A, _ = affine_from_coefficients(w)
     # Column j of grad v: A(w) e_j + Phi(x) dw/dx_j.
-    dv_code = _velocity(x, masked(dm_dx @ P, cfg.mask))  # [3, N, 3], indexed [j, n, i]
+    dv_code = velocity(x, masked(dm_dx @ P, cfg.mask))  # [3, N, 3], indexed [j, n, i]
     grad_v = A + dv_code.permute(1, 2, 0)
-    v = _velocity(x, w)
-    dv_dt = _velocity(x, masked(m @ dP_dt, cfg.mask))
+    v = velocity(x, w)
+    dv_dt = velocity(x, masked(m @ dP_dt, cfg.mask))
     return v, dv_dt, grad_v, m
 
 
 def _mixing_of_x(params, cfg):
     """x (N, 3) -> m(E(gamma(x))) (N, K): the only path through which w depends on x."""
-    return lambda x: mixing_weights(params, _code(params, x, cfg))
+    return lambda x: mixing_weights(params, physics_code(params, x, cfg))
 
 
 def _patterns_and_rate(params, t, cfg, like):
@@ -114,12 +114,12 @@ def mlp_residuals(params, x, t, cfg, with_divergence=False):
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    t_col = time_tensor(t, x).reshape(1, 1).repeat(x.shape[0], 1)  # its own memory: jvp's tangent is per row
-    v, dv_dt = jvp(lambda s: _mlp_velocity(params, x, s, cfg), (t_col,), (torch.ones_like(t_col),))
-    _, grad_v_v = jvp(lambda y: _mlp_velocity(params, y, t_col, cfg), (x,), (v,))
+    t0 = time_tensor(t, x).reshape(())
+    v, dv_dt = jvp(lambda s: mlp_velocity(params, x, s, cfg), (t0,), (torch.ones_like(t0),))
+    _, grad_v_v = jvp(lambda y: mlp_velocity(params, y, t, cfg), (x,), (v,))
     r = dv_dt + grad_v_v - acceleration_field(params, x, t, cfg)
     if not with_divergence:
         return r, None
-    div = sum(jvp(lambda y: _mlp_velocity(params, y, t_col, cfg), (x,), (e.expand_as(x),))[1][:, k]
+    div = sum(jvp(lambda y: mlp_velocity(params, y, t, cfg), (x,), (e.expand_as(x),))[1][:, k]
               for k, e in enumerate(torch.eye(3, dtype=x.dtype, device=x.device)))
     return r, div
