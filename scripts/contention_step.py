@@ -13,11 +13,11 @@ import time
 
 import torch
 
-from velogauss.bench.load import _training_pass
+from velogauss.bench.load import training_pass
 
 
 def main(scene, threads, seconds):
-    one_pass, _ = _training_pass(scene, threads)
+    one_pass, _ = training_pass(scene, threads)
     for _ in range(2):
         one_pass()
     preloaded = ctypes.CDLL(None) if os.environ.get("LD_PRELOAD") else None

@@ -173,7 +173,7 @@ def train_command(
         if not resume and not overwrite:
             _refuse_existing_run(run_dir)
         if data_dir is None and scene is None and resume:
-            data_dir = _recorded_data_dir(run_dir)
+            data_dir = recorded_data_dir(run_dir)
         cfg = build_config(cfg_source, set_, flags)
         check_device(cfg.train.device, "train.device")
         check_writable(run_dir)
@@ -274,7 +274,7 @@ def eval_command(
             raise ValueError(f"--split: expected one of {', '.join(SPLIT_CHOICES)}, got {split!r}")
         check_writable(run_dir, "metrics.json", "metrics.md")
         model, cfg = load_run_model(run_dir, device)
-        scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
+        scene = load_run_scene(cfg, data or recorded_data_dir(run_dir))
         result = run_evaluation(run_dir, model, scene, SPLIT_CHOICES[split], lpips_weights)
     typer.echo(_headline(result, run_dir))
 
@@ -298,7 +298,7 @@ def render_command(
         out = out or run_dir / "renders"
         check_writable(out)
         model, cfg = load_run_model(run_dir, device)
-        scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
+        scene = load_run_scene(cfg, data or recorded_data_dir(run_dir))
         written = run_render(out, model, scene, fps=fps, label=labels)
     typer.echo(f"wrote {len(written)} files to {out}")
 
@@ -420,7 +420,7 @@ def with_data_dir(cfg, data_dir):
     return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, dir=str(Path(data_dir).resolve())))
 
 
-def _recorded_data_dir(run_dir):
+def recorded_data_dir(run_dir):
     """The scene folder a run was trained on, from `RUN_DIR/config.toml`."""
     cfg = load_config(_existing_file(Path(run_dir) / "config.toml", "run config"))
     if not cfg.data.dir:

@@ -40,7 +40,7 @@ from matplotlib.figure import Figure
 from scipy.spatial.transform import Rotation
 
 from velogauss.bench.harness import machine, regenerate_command, timed_passes, write_section
-from velogauss.bench.motion import _leaves
+from velogauss.bench.motion import leaves
 from velogauss.config import ModelConfig
 from velogauss.io_utils import save_figure
 from velogauss.model.profile import resolve_profile
@@ -209,7 +209,7 @@ def _timings(p, method, h, repeats, device):
     Forward under no_grad; backward of <out, c> for a fixed random cotangent c, to every
     motion parameter and to x0, q0, s0, as training does.
     """
-    leaves = _leaves(p.params) + [p.x0, p.q0, p.s0]
+    tensors = leaves(p.params) + [p.x0, p.q0, p.s0]
     g = torch.Generator().manual_seed(0)
     cot = [torch.randn(p.x0.shape[0], k, generator=g).to(device=device, dtype=p.x0.dtype) for k in (3, 4, 3)]
 
@@ -223,7 +223,7 @@ def _timings(p, method, h, repeats, device):
         sync()
 
     def forward_backward():
-        for leaf in leaves:
+        for leaf in tensors:
             leaf.grad = None
         sum((o * c).sum() for o, c in zip(_integrate(p, method, h), cot)).backward()
         sync()

@@ -79,7 +79,7 @@ def setting_threads(setting):
 
 # --- the worker (a fresh process per setting and condition) ------------------------------
 
-def _training_pass(scene_dir, threads):
+def training_pass(scene_dir, threads):
     """A function running one training iteration of the default config on `scene_dir`, and
     the number of Gaussians it trains."""
     from velogauss.config import load_config
@@ -140,7 +140,7 @@ def _worker(setting, workloads, seconds, scene_dir, quick):
     results = {}
     for workload in workloads:
         if workload == "train":
-            one_pass, n = _training_pass(scene_dir, threads)
+            one_pass, n = training_pass(scene_dir, threads)
         else:
             apply_threads(threads)
             one_pass, n = _render_pass(workload, quick)
@@ -157,7 +157,7 @@ def _worker(setting, workloads, seconds, scene_dir, quick):
 
 def _competitor_training(setting, scene_dir):
     """Train forever (the `training` condition's competitor); says `ready` after its warm-up."""
-    one_pass, _ = _training_pass(scene_dir, setting_threads(setting))
+    one_pass, _ = training_pass(scene_dir, setting_threads(setting))
     for _ in range(_WARMUP_PASSES):
         one_pass()
     print(_READY, flush=True)

@@ -46,8 +46,9 @@ PARTS = [
     ("optimizer (Adam step)", 1, [("torch/optim/adam.py", "step")]),
     ("PSNR of the view (host sync)", 1, [("velogauss_fast/metrics.py", "psnr")]),
     ("density control etc. (`maintain`)", 0, [("train/loop.py", "maintain")]),
-    ("argument checks (`check_array`, `check_time`)", 0,
-     [("velogauss_fast/checks.py", "check_array"), ("motion/scalars.py", "check_time")]),
+    ("argument checks (`check_array`, `check_finite`, `check_time`)", 0,
+     [("velogauss_fast/checks.py", "check_array"), ("velogauss_fast/checks.py", "check_finite"),
+      ("motion/scalars.py", "check_time")]),
 ]
 
 
@@ -63,11 +64,11 @@ def _cumulative(stats, suffix, name):
 
 def measure(iterations, quick=False):
     """{"unprofiled_s", "profiled_s", "rows": [(label, indent, s per iteration, calls per iteration)], "gaussians"}."""
-    from velogauss.bench.load import _training_pass, make_default_scene
+    from velogauss.bench.load import make_default_scene, training_pass
 
     with tempfile.TemporaryDirectory(prefix="velogauss-profile-") as tmp:
         scene = make_default_scene(Path(tmp) / "scene", quick)
-        one_pass, n = _training_pass(scene, 0)
+        one_pass, n = training_pass(scene, 0)
         for _ in range(2):
             one_pass()
         t0 = time.perf_counter()

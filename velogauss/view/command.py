@@ -23,7 +23,7 @@ def view_command(
 ):
     """Explore a trained run in the browser: orbit the scene, scrub or play time past the observed window
     into the future, show velocity arrows, trajectories and the ground-truth cameras."""
-    from velogauss.cli import _recorded_data_dir, load_run_model, load_run_scene, user_errors
+    from velogauss.cli import load_run_model, load_run_scene, recorded_data_dir, user_errors
     from velogauss.threads import apply_threads
 
     with user_errors():
@@ -40,7 +40,7 @@ def view_command(
         _check_port_free(host, port)
         apply_threads(threads or 0)
         model, cfg = load_run_model(run_dir, device)
-        scene = load_run_scene(cfg, data or _recorded_data_dir(run_dir))
+        scene = load_run_scene(cfg, data or recorded_data_dir(run_dir))
     from velogauss.view.server import Viewer
 
     max_time = float(cfg.data.max_time)
