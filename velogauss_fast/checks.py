@@ -2,9 +2,10 @@
 
 Two checks, both raising ValueError whose message starts with the argument's name:
 
-- `check_array`: type, shape and floating dtype, read from the tensor's metadata alone. Every
-  public function of `velogauss_fast` runs it; it never reads the data, so it costs no
-  device sync and works on the wrapped tensors of `torch.func.jvp`/`vmap`.
+- `check_array`: type, shape and floating dtype, read from the tensor's metadata alone. The
+  spec functions of `velogauss_fast` (the twins of `velogauss_ref`'s) run it on their
+  tensor arguments; it never reads the data, so it costs no device sync and works on the
+  wrapped tensors of `torch.func.jvp`/`vmap`.
 - `check_finite`: NaN and inf, which needs the data: one host read of a flag computed on
   the tensors' device (a device sync on CUDA). It runs only where data enters, gsplat's
   way: `velogauss_fast.rasterize`, the model (`velogauss.model.dynamic`); the data loaders
