@@ -48,7 +48,8 @@ def test_basis_matches_scipy_spherical_harmonics(dirs):
     # the way 3DGS's eval_sh is: sqrt(2) Im Y_l^|m| for m < 0, Y_l^0, sqrt(2) Re Y_l^m for
     # m > 0, in the order m = -l..l within band l.
     unit = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
-    theta = np.arccos(np.clip(unit[:, 2], -1.0, 1.0))
+    # arctan2, not arccos(z): arccos loses half the digits of theta next to the poles.
+    theta = np.arctan2(np.hypot(unit[:, 0], unit[:, 1]), unit[:, 2])
     phi = np.arctan2(unit[:, 1], unit[:, 0])
     expected = []
     for band in range(4):
