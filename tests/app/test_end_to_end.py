@@ -43,10 +43,11 @@ def test_learned_velocity_matches_the_ground_truth(spin_run):
     scene, truth, model = spin_run
     err = velocity_error(model, truth, scene.max_time)
     # A zero field scores 1.0 and a random direction about 1.4. Seeds 0-2 of this set-up
-    # learn the spin to 0.10-0.12 observed and 0.09-0.12 in the future; the bounds leave
-    # twice that, so a regression in the motion model or the training shows here.
-    assert err["observed"]["relative_l2"] < 0.25
-    assert err["future"]["relative_l2"] < 0.3
+    # (training defaults: 3 views per step, lambda_adf 10) learn the spin to 0.081-0.092
+    # observed and 0.081-0.107 in the future; the bounds leave about 1.6x the worst seed, so a
+    # regression in the motion model or the training shows here.
+    assert err["observed"]["relative_l2"] < 0.15
+    assert err["future"]["relative_l2"] < 0.18
 
 
 def test_extrapolation_beats_holding_still(spin_run):
@@ -54,11 +55,12 @@ def test_extrapolation_beats_holding_still(spin_run):
     result = evaluate_model(model, scene, splits=("interpolation", "extrapolation"), ground_truth=truth)
     extrap = result["splits"]["extrapolation"]["mean"]["psnr"]
     frozen = result["freeze_baseline"]["mean"]["psnr"]
-    # Seeds 0-2: 4.0-5.0 dB above holding the last observed frame still.
-    assert extrap > frozen + 3.0
-    assert result["splits"]["interpolation"]["mean"]["psnr"] > 22.0
+    # Seeds 0-2: 5.6-5.7 dB above holding the last observed frame still, interpolation
+    # 25.6-26.3 dB, future trajectories 5.5-6.6 % of the nothing-moved distance.
+    assert extrap > frozen + 4.5
+    assert result["splits"]["interpolation"]["mean"]["psnr"] > 24.5
     traj = result["motion"]["trajectory"]
-    assert traj["future"]["mean_distance"] < 0.5 * traj["future"]["static_mean_distance"]
+    assert traj["future"]["mean_distance"] < 0.12 * traj["future"]["static_mean_distance"]
 
 
 def test_cli_train_eval_render_export(tmp_path):

@@ -67,6 +67,22 @@ def test_views_of_a_step_share_one_time_and_differ_in_camera():
     assert len(sampler.sample_views(5, rng, 1)) == 1
 
 
+@pytest.mark.parametrize("iterations, resets", [(12, []), (16, [8])])
+def test_an_opacity_reset_needs_a_period_of_training_after_it(tiny_scene, tmp_path, monkeypatch, iterations, resets):
+    """TINY resets every 8 iterations up to 10: at 8 of 16 (8 left), not at 8 of 12 (4 left)."""
+    current, resets_at = {}, []
+    monkeypatch.setattr(loop, "reset_opacity", lambda model, optimizer: resets_at.append(current["done"]))
+    maintain = loop._Loop.maintain
+
+    def recording(self, done):
+        current["done"] = done
+        maintain(self, done)
+
+    monkeypatch.setattr(loop._Loop, "maintain", recording)
+    loop.train(load_config(None, TINY + [f"train.iterations={iterations}"]), tiny_scene, tmp_path, progress=False)
+    assert resets_at == resets
+
+
 def _model(tiny_scene, overrides=()):
     cfg = load_config(None, TINY + list(overrides))
     profile = scene_profile(cfg, tiny_scene.metadata)
