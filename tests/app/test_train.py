@@ -4,6 +4,7 @@ detection, atomic checkpoints, exact resume and Ctrl-C."""
 import json
 import signal
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -81,6 +82,17 @@ def test_an_opacity_reset_needs_a_period_of_training_after_it(tiny_scene, tmp_pa
     monkeypatch.setattr(loop._Loop, "maintain", recording)
     loop.train(load_config(None, TINY + [f"train.iterations={iterations}"]), tiny_scene, tmp_path, progress=False)
     assert resets_at == resets
+
+
+def test_a_schedule_too_short_for_its_curriculum_warns_naming_the_keys():
+    # TINY opens the window at 3 + 4 = 7: 12 iterations leave 5 (>= 4), 8 leave 1.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loop.warn_short_schedule(load_config(None, TINY).train)
+    with pytest.warns(UserWarning, match=r"train.iterations = 8: .* leaving 1 iterations .* train.curriculum"):
+        loop.warn_short_schedule(load_config(None, TINY + ["train.iterations=8"]).train)
+    with pytest.warns(UserWarning, match="leaving 600"):
+        loop.warn_short_schedule(load_config(None, ["train.iterations=2000"]).train)
 
 
 def _model(tiny_scene, overrides=()):

@@ -1,12 +1,15 @@
-"""The training loop: one view per iteration, photometric + physics losses, density control.
+"""The training loop: a few views of one time per iteration, photometric + physics losses,
+density control.
 
 Per iteration (velogauss.config holds every number):
-1. draw a training frame by the time curriculum (velogauss.train.sampling);
-2. move the Gaussians to its time (VG-TRAJ + VG-ADF) and render it (VG-RENDER);
-3. loss = photometric (VG-LOSS) + ramped physics loss (VG-LOSS-PHYS) on collocation
+1. draw a training frame by the time curriculum, with up to `train.views - 1` other cameras
+   of its time (velogauss.train.sampling);
+2. move the Gaussians to that time once (VG-TRAJ + VG-ADF) and render each view (VG-RENDER);
+3. loss = photometric (VG-LOSS, the mean over the views) + ramped physics loss (VG-LOSS-PHYS) on collocation
    points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual);
 4. Adam step with the scheduled learning rates; density statistics; every
-   `densify.every` iterations clone/split/prune, opacity resets, static-particle detection.
+   `densify.every` iterations clone/split/prune, opacity resets (each followed by at least a
+   reset period of training), static-particle detection.
 A progress bar shows loss, PSNR and the Gaussian count; every `eval_every` iterations the
 PSNR on the interpolation split goes to `RUN_DIR/log.jsonl`; checkpoints are atomic and
 resuming from one continues exactly where it stopped (same draws, same numbers). Ctrl-C
@@ -17,6 +20,7 @@ import contextlib
 import json
 import signal
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +64,22 @@ def train(cfg, data, run_dir, resume=False, progress=True):
     return loop.model.eval()
 
 
+def warn_short_schedule(train_cfg):
+    """Warn (UserWarning naming the keys) when fewer iterations train on the whole observed
+    window than the curriculum took to open it. `train.iterations=2000` with the other
+    defaults left 600 and ended below the frozen baseline; with `train.curriculum=800` the same
+    2000 iterations extrapolated 5 dB better (benchmarks/FIDELITY.md, section 4). A warning, not
+    an error: short runs are legitimate for tests and quick looks."""
+    opened = train_cfg.warmup + train_cfg.curriculum
+    left = train_cfg.iterations - opened
+    if train_cfg.curriculum and left < train_cfg.curriculum:
+        warnings.warn(
+            f"train.iterations = {train_cfg.iterations}: the time window opens fully at iteration {opened} "
+            f"(train.warmup + train.curriculum), leaving {max(left, 0)} iterations on the whole window, fewer "
+            f"than the curriculum's {train_cfg.curriculum}; the motion will be undertrained. Lower "
+            f"train.curriculum (and densify.until) with train.iterations.", UserWarning, stacklevel=3)
+
+
 def prepare(cfg, data, run_dir, resume=False):
     """The training state of `train` before its first iteration: (loop, first iteration).
 
@@ -68,6 +88,7 @@ def prepare(cfg, data, run_dir, resume=False):
     """
     apply_threads(cfg.train.threads)
     check_trainable_size(data)
+    warn_short_schedule(cfg.train)
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
     extent = camera_extent([f.camera for f in data.train])
