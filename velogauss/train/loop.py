@@ -178,7 +178,7 @@ class _Loop:
             bar.close()
 
     def step(self, it):
-        """One optimisation step; returns (loss, PSNR of the rendered view)."""
+        """One optimisation step; returns (loss, PSNR of the first rendered view)."""
         cfg, model = self.cfg, self.model
         set_learning_rates(self.optimizer, it, cfg.train, self.extent)
         indices = self.sampler.sample_views(it, self.rng, cfg.train.views)
@@ -291,9 +291,8 @@ class _Loop:
                               torch_generator(self.rng))
         # A reset sets every opacity low, and the schedule gives the Gaussians one period to
         # recover before the next; a reset with less than that left would end the run on
-        # faded Gaussians (train.iterations=2000 with the other defaults reset at the last
-        # iteration: 16.6 dB interpolation instead of 28), so it is skipped, as 3DGS resets
-        # only long before its end.
+        # faded Gaussians (train.iterations=2000 with the other defaults reset at the very
+        # last iteration), so it is skipped, as 3DGS resets only long before its end.
         recovers = self.cfg.train.iterations - done >= d.opacity_reset_every
         if d.opacity_reset_every and done % d.opacity_reset_every == 0 and done <= d.until and recovers:
             reset_opacity(model, self.optimizer)
