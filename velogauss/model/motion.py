@@ -130,7 +130,7 @@ def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):
     """(transport residual (N, 3), divergence (N,) or None) at collocation points x (N, 3).
 
     VG-TRANSPORT (VG-TRANSPORT-MLP without PDS) and VG-DIV; the divergence is computed only
-    when spec.divergence (the transport residual alone needs one JVP instead of three).
+    when spec.divergence (the affine field shares one grad v between the two).
     """
     cfg = spec.config
     if spec.velocity == "affine":

@@ -31,6 +31,19 @@ def mixing_weights(params, z):
     return torch.softmax(z @ A + c, dim=-1)  # [N, K]
 
 
+def mixing_weights_jet(params, z, dz):
+    """(m(z), its directional derivatives along the tangents dz) (VG-COEF), by hand.
+
+    z: (N, L) codes; dz: (T, N, L) -> m: (N, K) as `mixing_weights`, dm: (T, N, K), from the
+    softmax's derivative dm = m (dl - <m, dl>) with dl = dz A the tangents of the logits.
+    Unchecked, as `mixing_weights`.
+    """
+    A, _ = params["mix"][0]
+    m = mixing_weights(params, z)
+    dl = dz @ A  # [T, N, K]
+    return m, m * (dl - (m * dl).sum(-1, keepdim=True))
+
+
 def motion_patterns(params, t, cfg):
     """P(t) (K, 12): the K motion patterns at the scalar time t (VG-COEF). Unchecked."""
     return motion_patterns_at(params, time_tensor(t, params["time"][0][0]), cfg)[0]  # [K, 12]

@@ -7,22 +7,27 @@ The reference differentiates v(x, t) = Phi(x) w(t, E(gamma(x))) with reverse mod
 point at a time. Here the whole batch is done at once from the structure of v:
 - Phi is linear in x, so with w held fixed grad_x v = A(w) exactly;
 - v is linear in w, so the rest of grad_x v is Phi(x) (dw/dx), and only the code path
-  x -> m(E(gamma(x))) needs differentiating: forward-mode JVPs (torch.func.jvp), batched
-  over all points at once because each point's mixing weights depend on that point alone;
-- dw/dt = m(z) dP/dt needs one JVP of the time network (K x 12 values) per time.
-Every JVP here composes with reverse mode, so the residuals backpropagate to the
-parameters (and to x) as the physics loss requires.
+  x -> m(E(gamma(x))) needs differentiating: forward mode written out for its known layers
+  (`positional_encoding_jet`, `mlp_jet`, `mixing_weights_jet`), the three axis tangents of
+  every point carried through one pass beside the values (each point's mixing weights
+  depend on that point alone);
+- dw/dt = m(z) dP/dt needs one tangent through the time network (K x 12 values) per time.
+These are plain differentiable ops, so the residuals backpropagate to the parameters (and
+to x) as the physics loss requires. Written out instead of torch.func's vmap(jvp), the
+forward takes less than half the time and forward + backward about 1/1.6 of it on 1,024
+points (the backward, reverse mode through the same tangents, costs about the same);
+benchmarks/RESULTS.md, "Training step: before / after".
 """
 
 import torch
-from torch.func import jvp, vmap
+from torch.func import jvp
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.basis import affine_from_coefficients
-from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.coefficients import masked, mixing_weights, motion_patterns
+from velogauss_fast.motion.coefficients import masked, mixing_weights_jet
 from velogauss_fast.motion.scalars import check_time, time_tensor
 from velogauss_fast.motion.velocity import mlp_velocity, velocity
+from velogauss_fast.nn import mlp_jet, positional_encoding_jet
 from velogauss_fast.physics.acceleration import acceleration_coefficients, acceleration_field
 
 
@@ -31,20 +36,11 @@ def transport_residual(params, x, t, cfg):
 
     params: motion parameter dict; x: (N, 3) collocation points; t: scalar time (number or
     0-d tensor); cfg: MotionConfig -> r: (N, 3). grad v includes the dependence of the code
-    on x; (grad v) v is A(w) v plus one JVP of the code path along v.
+    on x.
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    P, dP_dt = _patterns_and_rate(params, t, cfg, x)
-    m_of_x = _mixing_of_x(params, cfg)
-    m = m_of_x(x)
-    w = masked(m @ P, cfg.mask)
-    v = velocity(x, w)
-    _, dm_v = jvp(m_of_x, (x,), (v,))  # d m / d x along v, [N, K]
-    A, _ = affine_from_coefficients(w)
-    grad_v_v = (A * v[:, None, :]).sum(-1) + velocity(x, masked(dm_v @ P, cfg.mask))
-    dv_dt = velocity(x, masked(m @ dP_dt, cfg.mask))
-    return dv_dt + grad_v_v - velocity(x, acceleration_coefficients(params, t, m, cfg))
+    return _transport(params, x, t, cfg, *_velocity_jet(params, x, t, cfg))
 
 
 def divergence(params, x, t, cfg):
@@ -63,24 +59,27 @@ def physics_residuals(params, x, t, cfg):
     """(transport residual (N, 3), divergence (N,)) from one shared evaluation of grad v.
 
     Same values as `transport_residual` and `divergence`, for a training step that needs
-    both: the code path is differentiated once along the three axes and (grad v) v is then
-    a 3 x 3 product instead of a further JVP.
+    both: the code path is differentiated once along the three axes for both.
     """
     check_array("x", x, (None, 3))
     check_time("t", t)
-    v, dv_dt, grad_v, m = _velocity_jet(params, x, t, cfg)
-    r = dv_dt + (grad_v * v[:, None, :]).sum(-1) - velocity(x, acceleration_coefficients(params, t, m, cfg))
-    return r, grad_v.diagonal(dim1=-2, dim2=-1).sum(-1)
+    jet = _velocity_jet(params, x, t, cfg)
+    grad_v = jet[2]
+    return _transport(params, x, t, cfg, *jet), grad_v.diagonal(dim1=-2, dim2=-1).sum(-1)
+
+
+def _transport(params, x, t, cfg, v, dv_dt, grad_v, m):
+    """r = dv/dt + (grad v) v - a (N, 3) from `_velocity_jet`'s outputs."""
+    return dv_dt + (grad_v * v[:, None, :]).sum(-1) - velocity(x, acceleration_coefficients(params, t, m, cfg))
 
 
 def _velocity_jet(params, x, t, cfg):
     """v (N, 3), dv/dt (N, 3), grad v (N, 3, 3) [i, j] = dv_i/dx_j, and m(x) (N, K)."""
     P, dP_dt = _patterns_and_rate(params, t, cfg, x)
-    m_of_x = _mixing_of_x(params, cfg)
-    axes = torch.eye(3, dtype=x.dtype, device=x.device)[:, None, :].expand(3, x.shape[0], 3)
-    # One JVP per coordinate axis, vmapped: the primal m is computed once, the three
-    # tangents dm/dx_j (3, N, K) together.
-    m, dm_dx = vmap(lambda e: jvp(m_of_x, (x,), (e,)), out_dims=(None, 0))(axes)
+    # z = E(gamma(x)) (VG-CODE) and m(z), each with its derivatives along the 3 axes.
+    gamma, d_gamma = positional_encoding_jet(x, cfg.n_freqs_x)  # [N, E], [3, N, E]
+    z, dz_dx = mlp_jet(params["code"], gamma, d_gamma)  # [N, L], [3, N, L]
+    m, dm_dx = mixing_weights_jet(params, z, dz_dx)  # [N, K], [3, N, K]
     w = masked(m @ P, cfg.mask)
     A, _ = affine_from_coefficients(w)
     # Column j of grad v: A(w) e_j + Phi(x) dw/dx_j.
@@ -91,15 +90,12 @@ def _velocity_jet(params, x, t, cfg):
     return v, dv_dt, grad_v, m
 
 
-def _mixing_of_x(params, cfg):
-    """x (N, 3) -> m(E(gamma(x))) (N, K): the only path through which w depends on x."""
-    return lambda x: mixing_weights(params, physics_code(params, x, cfg))
-
-
 def _patterns_and_rate(params, t, cfg, like):
-    """P(t) and dP/dt (both (K, 12)) from one JVP of the time network."""
-    t0 = time_tensor(t, like).reshape(())
-    return jvp(lambda s: motion_patterns(params, s, cfg), (t0,), (torch.ones_like(t0),))
+    """P(t) and dP/dt (both (K, 12)) from one pass of the time network with one tangent."""
+    t0 = time_tensor(t, like)[:, None]  # [1, 1]
+    gamma, d_gamma = positional_encoding_jet(t0, cfg.n_freqs_t)  # [1, E], [1, 1, E]
+    P, dP_dt = mlp_jet(params["time"], gamma, d_gamma)  # [1, 12 K], [1, 1, 12 K]
+    return P.reshape(-1, 12), dP_dt.reshape(-1, 12)
 
 
 def mlp_residuals(params, x, t, cfg, with_divergence=False):

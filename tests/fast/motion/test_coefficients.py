@@ -8,7 +8,9 @@ from hypothesis import strategies as st
 
 from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreement, check_float32, gradcheck_fn,
                                      random_params, small_cfg, to_torch)
-from velogauss_fast.motion.coefficients import coefficients
+from torch.func import jvp
+
+from velogauss_fast.motion.coefficients import coefficients, mixing_weights, mixing_weights_jet
 from velogauss_fast.nn import mlp, positional_encoding
 from velogauss_ref.motion import coefficients as ref
 
@@ -70,3 +72,21 @@ def test_rejects_bad_input():
         coefficients(params, torch.zeros(2, dtype=torch.float64), z, cfg)
     with pytest.raises(ValueError, match="^z"):
         coefficients(params, 0.5, torch.zeros(3, cfg.code_dim + 1, dtype=torch.float64), cfg)
+
+
+@pytest.mark.spec("VG-COEF")
+@DEVICE_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), n=st.sampled_from([0, 1, 6]), tangents=st.integers(1, 3))
+def test_mixing_weights_jet_vs_autodiff(device, seed, n, tangents):
+    # The softmax's derivative written out, against torch's forward mode, float64 (both
+    # round only in the last bits).
+    cfg = small_cfg()
+    params = to_torch(random_params(seed, cfg), torch.float64, device)
+    rng = np.random.default_rng(seed)
+    z = torch.tensor(rng.standard_normal((n, cfg.code_dim)) * 3, device=device)
+    dz = torch.tensor(rng.standard_normal((tangents, n, cfg.code_dim)), device=device)
+    m, dm = mixing_weights_jet(params, z, dz)
+    assert torch.equal(m, mixing_weights(params, z))
+    for k in range(tangents):
+        _, expected = jvp(lambda u: mixing_weights(params, u), (z,), (dz[k],))
+        torch.testing.assert_close(dm[k], expected, rtol=1e-12, atol=1e-12)
