@@ -163,3 +163,24 @@ def test_step_profile_quick(tmp_path):
     assert calls["step (`_Loop.step`)"] == 1
     step_ms = float(rows[0][1])
     assert all(float(row[1]) <= step_ms for row in rows[1:] if row[0].startswith("&nbsp;"))
+
+
+def test_step_ratio_quick(tmp_path):
+    import subprocess
+
+    from velogauss.bench import step_ratio
+
+    if subprocess.run(["git", "cat-file", "-e", f"{step_ratio.BEFORE}^{{commit}}"], capture_output=True).returncode:
+        pytest.skip(f"the 'before' revision {step_ratio.BEFORE} is not in this clone")
+    out = tmp_path / "RESULTS.md"
+    result = step_ratio.run(str(out), quick=True)
+    body = section(out.read_text(), "Training step: before / after")
+    assert "Regenerate: `python -m velogauss.bench.step_ratio --quick`" in body
+    header, rows = table(body)
+    assert header == ["round", "before (ms per iteration)", "after (ms per iteration)", "before / after"]
+    assert len(rows) == step_ratio.QUICK_ROUNDS
+    # The two implementations agree to rounding in float64 on the training's parameters:
+    # relative 1e-12 of each value, or 1e-18 absolute for the divergence, a sum of grad v
+    # terms ~1e-3 that cancel to ~1e-12 at the start of training (rounding 1e-3 x 1e-16).
+    for name, (diff, scale) in result["agreement"].items():
+        assert diff <= 1e-12 * scale + 1e-18, (name, diff, scale)

@@ -79,9 +79,10 @@ def setting_threads(setting):
 
 # --- the worker (a fresh process per setting and condition) ------------------------------
 
-def training_pass(scene_dir, threads):
-    """A function running one training iteration of the default config on `scene_dir`, and
-    the number of Gaussians it trains."""
+def training_loop(scene_dir, threads):
+    """The `_Loop` of the default config on `scene_dir` (velogauss.train.loop.prepare) and the
+    first iteration the benchmarks time: warmup + curriculum, with motion, ADF and the full
+    physics loss on."""
     from velogauss.config import load_config
     from velogauss.data import load_scene
     from velogauss.train.loop import prepare
@@ -89,7 +90,14 @@ def training_pass(scene_dir, threads):
     cfg = load_config(overrides=[f"train.threads={threads}"])
     data = load_scene(scene_dir, max_time=cfg.data.max_time, background=cfg.data.background)
     loop, _ = prepare(cfg, data, tempfile.mkdtemp(prefix="velogauss-load-"))
-    counter = {"it": cfg.train.warmup + cfg.train.curriculum}
+    return loop, cfg.train.warmup + cfg.train.curriculum
+
+
+def training_pass(scene_dir, threads):
+    """A function running one training iteration of the default config on `scene_dir`, and
+    the number of Gaussians it trains."""
+    loop, first = training_loop(scene_dir, threads)
+    counter = {"it": first}
 
     def one_pass():
         loop.step(counter["it"])
