@@ -85,7 +85,7 @@ def _fail(message):
 def make_scene_command(
     name: Optional[str] = typer.Argument(None, help="Scene name (see --list)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder [default: data/NAME]."),
-    resolution: int = typer.Option(64, help="Image width and height in pixels."),
+    resolution: int = typer.Option(128, help="Image width and height in pixels."),
     views: int = typer.Option(8, help="Number of cameras on the ring (2 of them held out for evaluation)."),
     times: int = typer.Option(21, help="Number of time steps in [0, 1]."),
     seed: int = typer.Option(0, help="Seed of the camera placement and point cloud."),

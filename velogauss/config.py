@@ -24,7 +24,8 @@ import tomli_w
 from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
-from velogauss_core.motion import ABLATIONS, EFFECTS, INTEGRATORS, Ablation, Effect, Integrator, MotionConfig, Scheme
+from velogauss_core.motion import (ABLATIONS, EFFECTS, INTEGRATORS, AccelerationForm, Ablation, Effect, Integrator,
+                                   MotionConfig, Scheme)
 
 
 def _int(**bounds):
@@ -68,6 +69,12 @@ class ModelConfig:
     effects: Union[Literal["auto"], Annotated[tuple[Effect, ...], Field(min_length=1)]] = "auto"
     # Divergence loss on/off, or "auto": scene.json's `incompressible`, else true.
     incompressible: Union[Literal["auto"], Flag] = "auto"
+    # How the learned acceleration depends on time (spec/physics.md): "poly" a quadratic in t
+    # per motion pattern (VG-ACC), "rigid" a body spinning at a constant rate whose centre falls
+    # under a constant acceleration (VG-ACC-RIGID), or "auto": rigid when the effects are
+    # rigid (translation, rotation, gravity), else poly. "poly" stays the default: "rigid"
+    # helped multi and cost toss 0.7 dB of extrapolation (benchmarks/FIDELITY.md, section 6).
+    acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
     # The motion networks' sizes (velogauss_ref.motion.config.MotionConfig, whose defaults
@@ -178,8 +185,9 @@ class DensifyConfig:
     until: _int(ge=0) = 2000
     every: Count = 100
     # Mean |d loss / d mean2d| in NDC units. 3DGS uses 2e-4 on ~800 px images; on the
-    # 64 px synthetic scenes that clones whole objects into ~20k Gaussians while the
-    # motion is still misfit, so the default is stricter.
+    # 64 px synthetic scenes that cloned whole objects into ~20k Gaussians while the
+    # motion is still misfit, so the default is stricter. At 128 px it gives about the same
+    # counts (toss 7.7k against 8.0k, benchmarks/FIDELITY.md).
     grad_threshold: _float(gt=0.0) = 5e-4
     percent_dense: Unit = 0.01  # clone below, split above this fraction of the extent
     prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # at 1 every Gaussian would be pruned

@@ -43,7 +43,7 @@ FILMSTRIP_COLUMNS = 8
 TRAJECTORY_GAUSSIANS = 150
 TRAJECTORY_TIMES = 41
 FIELD_GRID = 21
-# Small renders (the default synthetic scenes are 64 px) are enlarged by an integer factor,
+# Small renders (the default synthetic scenes are 128 px) are enlarged by an integer factor,
 # nearest neighbour, so that every panel is at least this many pixels high on screen.
 MIN_PANEL_HEIGHT = 192
 # The error panel's colour scale: a display choice, not a threshold. A mean absolute error of

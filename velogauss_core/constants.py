@@ -68,6 +68,13 @@ LPIPS_NORM_EPS = 1e-10
 # represents gravity (degree 0) and spin about a centre moving under gravity (degree 2)
 # exactly, while a bounded degree keeps the transport residual binding on v.
 ACC_POLY_DEGREE = 2
+# VG-ACC-RIGID: standard deviation of each pattern's initial spin omega, in radians per unit
+# of normalised time. The rigid form's acceleration is quadratic in omega (Omega^2), so at
+# omega = 0 its gradient is exactly zero and the spin could never start learning. Any non-zero
+# start gives the gradient a direction, and Adam's steps do not scale with its size; 0.1 keeps
+# the initial centripetal term (|omega|^2 |x - c| ~ 0.01 on unit-size scenes) negligible
+# against what the residual learns.
+RIGID_OMEGA_INIT = 0.1
 # A particle whose motion over the observed window stays below this many pixels, measured at
 # its depth in the training camera that sees it largest, is "static": it is frozen at its
 # canonical state and not integrated. A quarter pixel is below what the photometric loss

@@ -12,7 +12,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from velogauss_core.checks import check_scalar
-from velogauss_core.constants import ACC_POLY_DEGREE
+from velogauss_core.constants import ACC_POLY_DEGREE, RIGID_OMEGA_INIT
 
 # Number of affine basis velocity fields, the columns of Phi (VG-BASIS).
 N_BASIS = 12
@@ -50,6 +50,12 @@ Scheme = Literal["integrate", "adf-step"]
 # carried to t by the velocity (VG-CARRY), the authors' released code. Defined here, not in
 # velogauss.model.spec, because the config (which velogauss.model imports) types a key with it.
 
+AccelerationForm = Literal["poly", "rigid"]
+# How the acceleration of each motion pattern depends on time (spec/physics.md): "poly" a
+# polynomial of degree ACC_POLY_DEGREE in t per basis column (VG-ACC), "rigid" a body spinning
+# at a constant rate whose centre falls under a constant acceleration (VG-ACC-RIGID).
+ACC_FORMS: tuple[str, ...] = get_args(AccelerationForm)
+
 VelocityKind = Literal["affine", "mlp"]
 # How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP
 # v(gamma(x), t) (PDS off, "no-pds"); a model without velocity has None.
@@ -67,7 +73,8 @@ class MotionConfig:
     code_dim: L, the physics code size; n_patterns: K motion patterns;
     hidden, depth: width and number of hidden layers of every MLP;
     mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
-    acc_mask: None or 12 bools, the acceleration's columns (VG-ACC).
+    acc_mask: None or 12 bools, the acceleration's columns (VG-ACC);
+    acc_form: the acceleration's time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID).
     Masks are stored as tuples of bools so the config stays hashable and serialisable.
     """
 
@@ -81,6 +88,7 @@ class MotionConfig:
     depth: int = 3
     mask: tuple[bool, ...] | None = None
     acc_mask: tuple[bool, ...] | None = None
+    acc_form: AccelerationForm = "poly"
 
     def __post_init__(self):
         for name in ("n_freqs_x", "n_freqs_t", "n_freqs_adf_x", "n_freqs_adf_t"):
@@ -91,6 +99,8 @@ class MotionConfig:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, _check_mask(name, value))
+        if self.acc_form not in ACC_FORMS:
+            raise ValueError(f"acc_form: expected one of {ACC_FORMS}, got {self.acc_form!r}")
 
 
 def network_shapes(cfg: MotionConfig) -> dict[str, tuple[int, int]]:
@@ -114,12 +124,16 @@ def init_motion_params(rng, cfg):
       "code": E, 3 (1 + 2 n_freqs_x) -> hidden^depth -> code_dim;
       "mix":  [(A (code_dim, K), c (K,))], the pattern-mixing softmax of VG-COEF;
       "time": 1 (1 + 2 n_freqs_t) -> hidden^depth -> K * 12, the motion patterns P(t);
-      "acc":  Q (ACC_POLY_DEGREE + 1, K, 12), the acceleration polynomial of VG-ACC;
+      "acc":  the acceleration of each pattern: Q (ACC_POLY_DEGREE + 1, K, 12), the polynomial
+              of VG-ACC, or with cfg.acc_form "rigid" R (K, 12), each pattern's spin, linear
+              acceleration, centre and centre velocity at t = 0 (VG-ACC-RIGID);
       "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10.
     Hidden layers use PyTorch's default Linear initialisation (uniform within
     +-1/sqrt(fan_in)). Three heads start at zero, so a fresh model is the still canonical
     scene: the time network's last layer (no velocity), Q (no acceleration) and the ADF's
     last layer (identity correction). Their gradients are not zero, so all of them learn.
+    The rigid form starts with a small random spin (RIGID_OMEGA_INIT): its acceleration is
+    quadratic in the spin, whose gradient at exactly zero would be zero.
     """
     L, K = cfg.code_dim, cfg.n_patterns
     shapes = network_shapes(cfg)
@@ -132,7 +146,7 @@ def init_motion_params(rng, cfg):
         "code": mlp("code"),
         "mix": [(rng.standard_normal((L, K)) / np.sqrt(L), np.zeros(K))],
         "time": mlp("time", zero_last=True),
-        "acc": np.zeros((ACC_POLY_DEGREE + 1, K, N_BASIS)),
+        "acc": _acceleration_init(rng, cfg),
         "adf": mlp("adf", zero_last=True),
     }
 
@@ -146,6 +160,17 @@ def carry_start(t, offset, max_time):
     if t > max_time:
         return float(max_time)
     return float(min(max(t - offset, 0.0), max_time))
+
+
+def _acceleration_init(rng, cfg):
+    """The "acc" entry of `init_motion_params`: Q = 0 (VG-ACC), or a small random spin about
+    the origin with no linear acceleration (VG-ACC-RIGID)."""
+    K = cfg.n_patterns
+    if cfg.acc_form == "poly":
+        return np.zeros((ACC_POLY_DEGREE + 1, K, N_BASIS))
+    rigid = np.zeros((K, N_BASIS))
+    rigid[:, :3] = RIGID_OMEGA_INIT * rng.standard_normal((K, 3))
+    return rigid
 
 
 def mlp_layers(rng, d_in, hidden, depth, d_out, zero_last=False):

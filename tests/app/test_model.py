@@ -107,6 +107,7 @@ def test_mlp_velocity_moves_positions_only():
     motion = MotionParameters(spec, np.random.default_rng(4))
     with torch.no_grad():
         motion.velocity_mlp[-1].copy_(torch.tensor([0.5, 0.0, 0.0]))
+        motion.acc.zero_()  # no acceleration, whatever the form (a rigid one starts with a small spin)
     params = motion.params()
     x, q, s, base = gaussians_at(params, spec.without_adf(), x0, q0, s0, 0.8)
     torch.testing.assert_close(x, x0 + torch.tensor([0.4, 0.0, 0.0]), rtol=0, atol=1e-6)

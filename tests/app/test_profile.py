@@ -1,8 +1,11 @@
 """Tests of velogauss/model/profile.py: a scene's effects select what the motion model builds."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from velogauss.model.build import profile_from_dict
 from velogauss.model.profile import resolve_profile
 from velogauss.scenes import SCENES
 from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
@@ -14,20 +17,43 @@ def _cols(*groups):
     return tuple(c in {i for g in groups for i in g} for c in range(12))
 
 
-@pytest.mark.parametrize("effects, mask, acc, acc_mask", [
-    (("translation",), _cols(T), False, _cols()),
-    (("translation", "gravity"), _cols(T), True, _cols(T)),
-    (("gravity",), _cols(T), True, _cols(T)),
-    (("rotation",), _cols(T, R), True, _cols(T, R, S, H)),
-    (("translation", "rotation", "gravity"), _cols(T, R), True, _cols(T, R, S, H)),
-    (("stretch",), _cols(T, S), True, _cols(T, R, S, H)),
-    (("shear",), _cols(T, H), True, _cols(T, R, S, H)),
-    (("translation", "rotation", "stretch", "shear"), _cols(T, R, S, H), True, _cols(T, R, S, H)),
+@pytest.mark.parametrize("effects, mask, acc, acc_mask, form", [
+    (("translation",), _cols(T), False, _cols(), "poly"),
+    (("translation", "gravity"), _cols(T), True, _cols(T, R, S, H), "rigid"),
+    (("gravity",), _cols(T), True, _cols(T, R, S, H), "rigid"),
+    (("rotation",), _cols(T, R), True, _cols(T, R, S, H), "rigid"),
+    (("translation", "rotation", "gravity"), _cols(T, R), True, _cols(T, R, S, H), "rigid"),
+    (("stretch",), _cols(T, S), True, _cols(T, R, S, H), "poly"),
+    (("shear",), _cols(T, H), True, _cols(T, R, S, H), "poly"),
+    (("translation", "rotation", "stretch", "shear"), _cols(T, R, S, H), True, _cols(T, R, S, H), "poly"),
 ])
-def test_columns_and_acceleration(effects, mask, acc, acc_mask):
-    p = resolve_profile(effects, True)
+def test_columns_and_acceleration(effects, mask, acc, acc_mask, form):
+    p = resolve_profile(effects, True, acceleration="auto")
     assert p.moving and p.mask == mask and p.acceleration == acc and p.acc_mask == acc_mask
-    assert p.divergence
+    assert p.acc_form == form and p.divergence
+
+
+def test_acceleration_form_can_be_chosen():
+    # The default is the polynomial; on a falling body it keeps the translation-only columns.
+    falling = resolve_profile(("translation", "gravity"), True)
+    assert falling.acc_form == "poly" and falling.acc_mask == _cols(T)
+    assert resolve_profile(("rotation",), True, acceleration="poly").acc_form == "poly"
+    assert resolve_profile(("rotation", "gravity"), True, acceleration="rigid").acc_form == "rigid"
+    # No acceleration at all: nothing to choose.
+    assert resolve_profile(("translation",), True, acceleration="rigid").acc_form == "poly"
+
+
+@pytest.mark.parametrize("effects", [("stretch",), ("rotation", "shear")])
+def test_rigid_acceleration_refuses_a_deforming_scene(effects):
+    with pytest.raises(ValueError, match=r"^model\.acceleration: 'rigid' cannot follow"):
+        resolve_profile(effects, True, acceleration="rigid")
+
+
+def test_a_profile_saved_before_the_rigid_form_reads_as_polynomial():
+    # Checkpoints store dataclasses.asdict(profile); those written before acc_form existed lack it.
+    saved = dataclasses.asdict(resolve_profile(("rotation",), True, acceleration="poly"))
+    del saved["acc_form"]
+    assert profile_from_dict(saved).acc_form == "poly"
 
 
 def test_rigid_is_six_columns_affine_is_twelve():

@@ -70,6 +70,8 @@ VARIANTS = {
     "a-near": ["physics.placement=gaussians"],
     "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
     "a-lr-acc": ["train.lr_acc=0.005"],
+    "a-rigid": ["model.acceleration=rigid"],
+    "a-rigid-near": ["model.acceleration=rigid", "physics.placement=gaussians"],
 }
 # Accuracy against training time (the `pareto` command): each variant changes what one run
 # costs -- views per iteration, iterations, motion patterns K, integrator -- and nothing else.

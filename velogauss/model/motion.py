@@ -38,7 +38,7 @@ class MotionParameters(nn.Module):
 
     Attributes (each a ParameterList of W, b, W, b, ...): code (VG-CODE), mix (VG-COEF),
     time (VG-COEF, velocity "affine"), velocity_mlp (velocity "mlp"), adf (VG-ADF); acc
-    (VG-ACC's Q, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
+    (VG-ACC's Q or VG-ACC-RIGID's R, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
     weights (`velogauss_core.motion.init_motion_params`, then the velocity MLP's layers).
     """
 

@@ -12,7 +12,11 @@ rotation, gravity, stretch, shear, static) and whether its motion is incompressi
   is then Newton's first law); on for gravity and for any rotation, stretch or shear,
   whose material acceleration (centripetal, A² x) is non-zero even at constant
   coefficients. Its columns follow spec/physics.md: translation columns when the velocity
-  is translation-only, else all 12 (A² leaves the velocity's span).
+  is translation-only and the acceleration a polynomial, else all 12 (A² leaves the
+  velocity's span). Its time dependence:
+  a polynomial in t (VG-ACC) by default, or a rigid body's (VG-ACC-RIGID: constant spin,
+  centre under a constant acceleration), as the config's `model.acceleration` says ("auto":
+  rigid when the scene's motion is rigid, i.e. translation, rotation and gravity only).
 - divergence loss (VG-DIV): only for incompressible motion.
 - a scene with no motion effect (`static` alone) builds no velocity at all.
 """
@@ -21,6 +25,9 @@ from dataclasses import dataclass
 
 from velogauss_core.motion import COLUMN_GROUPS, EFFECTS, MOTION_EFFECTS
 
+# The motion effects a rigid body's acceleration (VG-ACC-RIGID) can follow.
+RIGID_EFFECTS = frozenset({"translation", "rotation"})
+
 
 @dataclass(frozen=True)
 class MotionProfile:
@@ -28,7 +35,9 @@ class MotionProfile:
 
     effects: the resolved effect list; moving: any motion at all; mask: 12 bools, the
     velocity's basis columns; acceleration: the VG-ACC term is built; acc_mask: 12 bools,
-    its columns; divergence: the VG-DIV loss is used.
+    its columns; acc_form: its time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID);
+    divergence: the VG-DIV loss is used. acc_form defaults to "poly", what every checkpoint
+    saved before the rigid form existed used.
     """
 
     effects: tuple
@@ -37,6 +46,7 @@ class MotionProfile:
     acceleration: bool
     acc_mask: tuple
     divergence: bool
+    acc_form: str = "poly"
 
     @property
     def n_columns(self):
@@ -44,11 +54,13 @@ class MotionProfile:
         return sum(self.mask)
 
 
-def resolve_profile(effects, incompressible, metadata=None):
-    """The `MotionProfile` of `effects` / `incompressible` ("auto" or explicit values).
+def resolve_profile(effects, incompressible, metadata=None, acceleration="poly"):
+    """The `MotionProfile` of `effects` / `incompressible` / `acceleration` ("auto" or explicit values).
 
     "auto" takes the scene's declaration from `metadata` (a parsed scene.json), else every
     effect and incompressible motion (what NVFi-style methods assume for real scenes).
+    `acceleration` (config `model.acceleration`, default "poly"): "poly" (VG-ACC), "rigid"
+    (VG-ACC-RIGID), or "auto", rigid when the motion effects are rigid ones, else poly. ValueError when "rigid" is asked of a scene that stretches or shears.
     """
     if effects == "auto":
         effects = tuple((metadata or {}).get("effects", EFFECTS))
@@ -60,15 +72,24 @@ def resolve_profile(effects, incompressible, metadata=None):
         groups.add("translation")
     mask = _columns(groups)
     moving = bool(groups)
-    acceleration = moving and ("gravity" in effects or bool(groups - {"translation"}))
-    if not acceleration:
+    has_acceleration = moving and ("gravity" in effects or bool(groups - {"translation"}))
+    rigid = groups <= RIGID_EFFECTS
+    if acceleration == "rigid" and not rigid:
+        raise ValueError(f"model.acceleration: 'rigid' cannot follow the effects {sorted(groups - RIGID_EFFECTS)} "
+                         "(a rigid body neither stretches nor shears); use 'poly' or 'auto'")
+    form = ("rigid" if rigid else "poly") if acceleration == "auto" else acceleration
+    form = form if has_acceleration else "poly"
+    if not has_acceleration:
         acc_mask = (False,) * 12
-    elif groups == {"translation"}:
+    elif groups == {"translation"} and form == "poly":
         acc_mask = _columns({"translation"})
     else:
+        # The rigid form's Omega^2 lies on the stretch and shear columns: masking them while
+        # keeping its -Omega^2 c(t) translation term would not be a rigid body's acceleration.
         acc_mask = (True,) * 12
-    return MotionProfile(effects=effects, moving=moving, mask=mask, acceleration=acceleration, acc_mask=acc_mask,
-                         divergence=moving and bool(incompressible))
+    return MotionProfile(effects=effects, moving=moving, mask=mask, acceleration=has_acceleration,
+                         acc_mask=acc_mask, divergence=moving and bool(incompressible),
+                         acc_form=form)
 
 
 def _columns(groups):

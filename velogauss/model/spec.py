@@ -53,8 +53,10 @@ class MotionSpec:
       other field is then off);
     velocity: "affine" (PDS: Phi(x) w(t, z) over config.mask, VG-VEL), "mlp" (no-pds) or None
       (deform-only: x* = x0);
-    config: network sizes and the basis masks (velocity mask, acceleration mask);
-    acceleration: the VG-ACC polynomial Q is a parameter (else Q = 0);
+    config: network sizes, the basis masks (velocity mask, acceleration mask) and the
+      acceleration's form;
+    acceleration: the acceleration (VG-ACC or VG-ACC-RIGID, config.acc_form) is a parameter
+      (else Q = 0);
     integrator, step: VG-INTEG's method and largest step in normalised time;
     adf: the ADF residual is built and applied (VG-ADF);
     adf_clamp_time: the ADF's input time is min(t, this), or None (evaluated at every t);
@@ -106,13 +108,13 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
     adf = moving and switches.adf
     clamp = model_cfg.adf_clamp_time and model_cfg.ablation != "deform-only"
     sizes = {f.name: getattr(model_cfg, f.name) for f in dataclasses.fields(MotionConfig)
-             if f.name not in ("mask", "acc_mask")}
+             if f.name not in ("mask", "acc_mask", "acc_form")}
     carry = model_cfg.scheme == "adf-step" and adf and velocity is not None
     return MotionSpec(
         scheme="adf-step" if carry else "integrate",
         moving=moving,
         velocity=velocity,
-        config=MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask),
+        config=MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask, acc_form=profile.acc_form),
         acceleration=moving and bool(profile.acceleration),
         integrator=model_cfg.integrator,
         step=float(model_cfg.step),

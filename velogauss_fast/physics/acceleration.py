@@ -1,7 +1,9 @@
 """Acceleration field a(x, t) = Phi(x) alpha(t, E(gamma(x))), in torch.
 
-Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC).
+Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC and VG-ACC-RIGID).
 """
+
+import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.code import physics_code
@@ -11,11 +13,12 @@ from velogauss_fast.motion.velocity import velocity
 
 
 def acceleration_field(params, x, t, cfg):
-    """a(x, t) = Phi(x) m(z) sum_d Q_d t^d with z = E(gamma(x)), masked by cfg.acc_mask (VG-ACC).
+    """a(x, t) = Phi(x) alpha(t, m(z)) with z = E(gamma(x)), masked by cfg.acc_mask (VG-ACC, VG-ACC-RIGID).
 
-    params: motion parameter dict (uses "code", "mix" and "acc" = Q (ACC_POLY_DEGREE + 1,
-    K, 12)); x: (N, 3) points; t: scalar time; cfg: MotionConfig -> a: (N, 3), world units
-    per unit time squared. All-zero Q (scenes without acceleration) gives a = 0.
+    params: motion parameter dict (uses "code", "mix" and "acc": Q (ACC_POLY_DEGREE + 1, K, 12)
+    when cfg.acc_form is "poly", R (K, 12) when "rigid"); x: (N, 3) points; t: scalar time;
+    cfg: MotionConfig -> a: (N, 3), world units per unit time squared. All-zero Q (scenes
+    without acceleration) gives a = 0.
     The acceleration's own mask cfg.acc_mask, not the velocity's cfg.mask, applies: the
     material derivative of a masked velocity field can need columns the velocity lacks.
     """
@@ -26,18 +29,38 @@ def acceleration_field(params, x, t, cfg):
 
 
 def acceleration_coefficients(params, t, m, cfg):
-    """alpha = m sum_d Q_d t^d (N, 12), masked by cfg.acc_mask, for mixing weights m (N, K)
-    (VG-ACC): the coefficients `acceleration_field` applies Phi(x) to, for callers that
-    already hold m at the points (the physics residuals share it with the velocity)."""
+    """alpha (N, 12), masked by cfg.acc_mask, for mixing weights m (N, K): m sum_d Q_d t^d
+    (VG-ACC) or rigid_patterns(m R, t) (VG-ACC-RIGID). The coefficients `acceleration_field` applies Phi(x) to, for
+    callers that already hold m at the points (the physics residuals share it with the velocity)."""
     check_time("t", t)
-    check_array("m", m, (None, params["acc"].shape[1]))
-    return masked(m @ acceleration_patterns(params["acc"], t), cfg.acc_mask)
+    check_array("m", m, (None, cfg.n_patterns))
+    if cfg.acc_form == "poly":
+        return masked(m @ polynomial_patterns(params["acc"], t), cfg.acc_mask)
+    # The rigid bodies' parameters are mixed, not their accelerations: a mixture of rigid
+    # accelerations with different spins and centres is a general quadratic in t again.
+    return masked(rigid_patterns(m @ params["acc"], t), cfg.acc_mask)
 
 
-def acceleration_patterns(Q, t):
+def polynomial_patterns(Q, t):
     """sum_d Q_d t^d: Q (D + 1, K, 12) -> (K, 12), the acceleration of each motion pattern,
-    by Horner's rule."""
+    by Horner's rule (VG-ACC)."""
     out = Q[-1]
     for Qd in Q.flip(0)[1:]:
         out = out * t + Qd
     return out
+
+
+def rigid_patterns(R, t):
+    """The coefficients of a(x, t) = g + Omega^2 (x - c(t)) per rigid body (VG-ACC-RIGID).
+
+    R: (..., 12), rows (omega, g, c0, u) with c(t) = c0 + u t + g t^2 / 2 -> (..., 12) in
+    VG-BASIS order: translation g - Omega^2 c(t), rotation 0, stretch diag(Omega^2), shear
+    (Omega^2_xy, Omega^2_yz, Omega^2_xz), with Omega^2 = omega omega^T - |omega|^2 I.
+    """
+    omega, g, c0, u = R.split(3, dim=-1)
+    c = c0 + u * t + 0.5 * g * (t * t)
+    spin2 = (omega * omega).sum(-1, keepdim=True)
+    omega2_c = omega * (omega * c).sum(-1, keepdim=True) - spin2 * c  # Omega^2 c
+    wx, wy, wz = omega.unbind(-1)
+    shear = torch.stack([wx * wy, wy * wz, wx * wz], dim=-1)
+    return torch.cat([g - omega2_c, torch.zeros_like(omega), omega * omega - spin2, shear], dim=-1)

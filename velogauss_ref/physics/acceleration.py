@@ -1,6 +1,7 @@
 """Acceleration field a(x, t) = Phi(x) alpha(t, E(gamma(x))).
 
-spec/physics.md, VG-ACC.
+spec/physics.md, VG-ACC (a polynomial in t per motion pattern) and VG-ACC-RIGID (a rigid
+body's acceleration per motion pattern).
 """
 
 import autograd.numpy as np
@@ -14,25 +15,33 @@ from velogauss_ref.motion.velocity import velocity
 
 
 def acceleration_field(params, x, t, cfg):
-    """a(x, t) = Phi(x) alpha with alpha = m(z) sum_d Q_d t^d, z = E(gamma(x)) (VG-ACC).
+    """a(x, t) = Phi(x) alpha with z = E(gamma(x)), m = m(z) and (VG-ACC, VG-ACC-RIGID)
+    alpha = m sum_d Q_d t^d ("poly") or alpha = rigid_patterns(m R, t) ("rigid").
 
-    params: motion parameter dict (uses "code", "mix" and "acc" = Q
-    (ACC_POLY_DEGREE + 1, K, 12)); x: (N, 3) points; t: scalar time, any real value;
-    cfg: MotionConfig -> a: (N, 3), world units per unit of normalised time squared.
+    params: motion parameter dict (uses "code", "mix" and "acc": Q (ACC_POLY_DEGREE + 1, K, 12)
+    when cfg.acc_form is "poly", R (K, 12) when it is "rigid"); x: (N, 3) points; t: scalar
+    time, any real value; cfg: MotionConfig -> a: (N, 3), world units per unit of normalised
+    time squared.
     alpha is masked by cfg.acc_mask (not cfg.mask: the acceleration of a masked velocity
     field can need columns the velocity lacks). An all-zero Q gives a = 0.
     Non-finite or wrongly shaped input raises ValueError.
     """
     check_array("x", x, (None, 3))
     check_scalar("t", t)
-    Q = params["acc"]
-    check_array('params["acc"]', Q, (ACC_POLY_DEGREE + 1, cfg.n_patterns, N_BASIS))
-    alpha = mixing_weights(params, physics_code(params, x, cfg)) @ acceleration_patterns(Q, t)
+    shape = (ACC_POLY_DEGREE + 1, cfg.n_patterns, N_BASIS) if cfg.acc_form == "poly" else (cfg.n_patterns, N_BASIS)
+    check_array('params["acc"]', params["acc"], shape)
+    m = mixing_weights(params, physics_code(params, x, cfg))
+    if cfg.acc_form == "poly":
+        alpha = m @ polynomial_patterns(params["acc"], t)
+    else:
+        # The rigid bodies' parameters are mixed, not their accelerations: a mixture of rigid
+        # accelerations with different spins and centres is a general quadratic in t again.
+        alpha = rigid_patterns(m @ params["acc"], t)
     return velocity(x, masked(alpha, cfg.acc_mask))
 
 
-def acceleration_patterns(Q, t):
-    """sum_d Q_d t^d: Q (D + 1, K, 12) -> (K, 12), the acceleration of each motion pattern.
+def polynomial_patterns(Q, t):
+    """sum_d Q_d t^d: Q (D + 1, K, 12) -> (K, 12), the acceleration of each motion pattern (VG-ACC).
 
     The powers t^d are built by products, not t ** d: autograd's derivative of t ** 0 at
     t = 0 is 0 * 0 ** -1 = NaN.
@@ -42,3 +51,21 @@ def acceleration_patterns(Q, t):
         total = total + Q[d] * power
         power = power * t
     return total
+
+
+def rigid_patterns(R, t):
+    """The coefficients of a(x, t) = g + Omega^2 (x - c(t)) per rigid body (VG-ACC-RIGID).
+
+    R: (N, 12), each row (omega, g, c0, u): the spin (Omega y = omega x y), the linear
+    acceleration, and the centre and its velocity at t = 0, so c(t) = c0 + u t + g t^2 / 2.
+    -> (N, 12) in VG-BASIS order: translation g - Omega^2 c(t), no rotation, stretch
+    diag(Omega^2), shear (Omega^2_xy, Omega^2_yz, Omega^2_xz). Omega^2 = omega omega^T - |omega|^2 I
+    is symmetric, so it lies on the stretch and shear columns.
+    """
+    omega, g, c0, u = R[:, 0:3], R[:, 3:6], R[:, 6:9], R[:, 9:12]
+    c = c0 + u * t + 0.5 * g * t * t
+    spin2 = np.sum(omega * omega, axis=1, keepdims=True)
+    omega2_c = omega * np.sum(omega * c, axis=1, keepdims=True) - spin2 * c  # Omega^2 c
+    wx, wy, wz = omega[:, 0], omega[:, 1], omega[:, 2]
+    shear = np.stack([wx * wy, wy * wz, wx * wz], axis=1)
+    return np.concatenate([g - omega2_c, np.zeros_like(omega), omega * omega - spin2, shear], axis=1)

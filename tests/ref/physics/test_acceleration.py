@@ -1,9 +1,11 @@
 """velogauss_ref.physics.acceleration: VG-ACC, a(x, t) = Phi(x) alpha(t, E(gamma(x))) with a
-degree-ACC_POLY_DEGREE polynomial in t per motion pattern and its own column mask."""
+degree-ACC_POLY_DEGREE polynomial in t per motion pattern and its own column mask, and
+VG-ACC-RIGID, a rigid body's acceleration per motion pattern."""
 
+import autograd.numpy as anp
 import numpy as np
 import pytest
-from autograd import grad
+from autograd import grad, jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -12,7 +14,10 @@ from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, TRANSLATION_MASK, affine_matrix,
                                     constant_coefficient_params, flat_params, random_params, small_cfg)
 from velogauss_core.constants import ACC_POLY_DEGREE
-from velogauss_ref.physics.acceleration import acceleration_field
+from velogauss_core.motion import init_motion_params
+from velogauss_ref.motion.code import physics_code
+from velogauss_ref.motion.coefficients import mixing_weights
+from velogauss_ref.physics.acceleration import acceleration_field, rigid_patterns
 
 seeds = st.integers(0, 2**32 - 1)
 points = hnp.arrays(np.float64, (5, 3), elements=st.floats(-1.5, 1.5))
@@ -109,3 +114,93 @@ def test_bad_input_names_the_argument(x, t, acc, name):
         params["acc"] = acc
     with pytest.raises(ValueError, match=f"^{name}:"):
         acceleration_field(params, x, t, cfg)
+
+
+# --- VG-ACC-RIGID ------------------------------------------------------------------------
+
+def _rigid_params(seed, cfg, R):
+    """Parameters whose every motion pattern has the rigid acceleration row R (12,): any
+    softmax mixture of the patterns then gives R's field."""
+    return {**random_params(seed, cfg), "acc": np.tile(np.asarray(R, dtype=np.float64), (cfg.n_patterns, 1))}
+
+
+vectors = hnp.arrays(np.float64, (3,), elements=st.floats(-2, 2))
+
+
+@pytest.mark.spec("VG-ACC-RIGID")
+@settings(max_examples=25)
+@given(omega=vectors, g=vectors, c0=vectors, u=vectors, x=points, t=st.floats(-2, 3))
+def test_rigid_form_is_the_material_acceleration_of_a_spinning_falling_body(omega, g, c0, u, x, t):
+    # Oracle: the velocity of a body spinning at omega about a centre c(t) = c0 + u t + g t^2 / 2,
+    # v(x, t) = omega x (x - c(t)) + c'(t), differentiated by autograd: Dv/Dt = dv/dt + (grad v) v.
+    def v(y, s):
+        c = c0 + u * s + 0.5 * g * s * s
+        return anp.cross(omega, y - c) + u + g * s
+
+    expected = np.array([jacobian(lambda s: v(xi, s))(t) + jacobian(lambda y: v(y, t))(xi) @ v(xi, t)
+                         for xi in x])
+    cfg = small_cfg(acc_form="rigid")
+    got = acceleration_field(_rigid_params(0, cfg, np.concatenate([omega, g, c0, u])), x, t, cfg)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * (1 + np.abs(expected).max()))
+
+
+@pytest.mark.spec("VG-ACC-RIGID")
+def test_rigid_patterns_by_hand():
+    # omega = (0, 0, 2): Omega^2 = diag(-4, -4, 0); g = (0, 0, -8), centre at rest at (1, 0, 0) at t = 0.
+    R = np.array([[0, 0, 2, 0, 0, -8, 1, 0, 0, 0, 0, 0]], dtype=np.float64)
+    t = 0.5  # c = (1, 0, -1): g - Omega^2 c = (4, 0, -8)
+    np.testing.assert_array_equal(rigid_patterns(R, t), [[4, 0, -8, 0, 0, 0, -4, -4, 0, 0, 0, 0]])
+    np.testing.assert_array_equal(rigid_patterns(np.zeros((3, 12)), t), np.zeros((3, 12)))
+
+
+@pytest.mark.spec("VG-ACC-RIGID")
+@settings(max_examples=10)
+@given(seed=seeds, t=st.floats(-3, 3))
+def test_rigid_patterns_gradient(seed, t):
+    R = np.random.default_rng(seed).standard_normal((4, 12))
+    check_grads_fd(rigid_patterns, (R, t), (0, 1), np.random.default_rng(seed), step=FD_STEP)
+
+
+@pytest.mark.spec("VG-ACC-RIGID")
+@settings(max_examples=10)
+@given(seed=seeds, x=hnp.arrays(np.float64, (3, 3), elements=st.floats(-1.5, 1.5)), t=st.floats(-3, 3))
+def test_rigid_acceleration_field_gradient(seed, x, t):
+    cfg = small_cfg(acc_form="rigid")
+    params = random_params(seed, cfg)
+    assert params["acc"].shape == (cfg.n_patterns, 12)
+    theta, unflatten = flat_params(params)
+    check_grads_fd(lambda theta, x, t: acceleration_field(unflatten(theta), x, t, cfg), (theta, x, t), (0, 1, 2),
+                   np.random.default_rng(seed), step=FD_STEP)
+
+
+def test_rigid_form_checks_the_shape_of_its_parameters():
+    cfg = small_cfg(acc_form="rigid")
+    params = {**random_params(0, cfg), "acc": np.zeros((3, cfg.n_patterns, 12))}  # a polynomial's Q
+    with pytest.raises(ValueError, match=r'^params\["acc"\]:'):
+        acceleration_field(params, np.zeros((2, 3)), 0.1, cfg)
+
+
+def test_fresh_rigid_parameters_have_a_spin_to_differentiate():
+    # Omega^2 is quadratic in omega: at omega = 0 its gradient is zero and the spin never learns.
+    cfg = small_cfg(acc_form="rigid")
+    R = init_motion_params(np.random.default_rng(0), cfg)["acc"]
+    assert R.shape == (cfg.n_patterns, 12) and np.all(R[:, 3:] == 0)
+    assert np.all(np.linalg.norm(R[:, :3], axis=1) > 0)
+    d = grad(lambda R: np.sum(rigid_patterns(R, 0.3)[:, 6:] ** 2))(R)
+    assert np.abs(d[:, :3]).max() > 0
+
+
+@pytest.mark.spec("VG-ACC-RIGID")
+@settings(max_examples=10)
+@given(seed=seeds, x=points, t=st.floats(-2, 3))
+def test_rigid_form_mixes_the_bodies_not_their_accelerations(seed, x, t):
+    # Every point follows one rigid body, B = m(z) R: its acceleration, written by hand with
+    # cross products, is g + omega x (omega x (x - c(t))) of the mixed parameters.
+    cfg = small_cfg(acc_form="rigid")
+    params = random_params(seed, cfg, scale=3.0)
+    B = mixing_weights(params, physics_code(params, x, cfg)) @ params["acc"]
+    omega, g, c0, u = B[:, 0:3], B[:, 3:6], B[:, 6:9], B[:, 9:12]
+    c = c0 + u * t + 0.5 * g * t * t
+    expected = g + np.cross(omega, np.cross(omega, x - c))
+    got = acceleration_field(params, x, t, cfg)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * (1 + np.abs(expected).max()))
