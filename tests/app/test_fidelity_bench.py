@@ -33,6 +33,7 @@ def test_pareto_plot_groups_seeds_and_counts_the_defaults_as_their_cost_point(tm
     assert (tmp_path / "p.png").stat().st_size > 0
     rows = table.splitlines()[2:]
     assert len(rows) == 2  # other scenes and non-cost variants are left out
+    assert pareto_plot(records, tmp_path / "m.png", scene="multi").splitlines()[2].startswith("| cost-v3-i3000 | 1 | 999")
     assert rows[0].startswith("| cost-v1-i2000 | 2 | 105 (100–110) | 20.50 (20.00–21.00) | 0.250 (0.200–0.300)")
     assert rows[1].startswith("| cost-v3-i3000 | 2 | 210 (200–220) | 22.50 (22.00–23.00) |")
 

@@ -68,6 +68,7 @@ VARIANTS = {
     "b-carry": ["model.scheme=adf-step", "train.lambda_carry=1.0"],
     "b-carry-near": ["model.scheme=adf-step", "train.lambda_carry=1.0", "physics.placement=gaussians"],
     "a-near": ["physics.placement=gaussians"],
+    "a-box": ["physics.placement=box"],
     "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
     "a-lr-acc": ["train.lr_acc=0.005"],
     "a-rigid": ["model.acceleration=rigid"],
@@ -274,10 +275,10 @@ def pareto_front(costs, scores, sign):
     return front
 
 
-def pareto_plot(records, path):
+def pareto_plot(records, path, scene="toss"):
     """Write `path` (PNG): extrapolation PSNR and future velocity error against training wall
-    time, one point per cost variant (mean over its seeds, bars: min-max), the runs on the
-    Pareto front joined. Returns the Markdown table of the plotted points."""
+    time on `scene`, one point per cost variant (mean over its seeds, bars: min-max), the runs
+    on the Pareto front joined. Returns the Markdown table of the plotted points."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -287,7 +288,7 @@ def pareto_plot(records, path):
     for r in records:
         # The defaults are one of the cost points: 3 views, 3000 iterations (velogauss.config).
         variant = DEFAULT_COST if r["variant"] == "a" else r["variant"]
-        if variant in COST_VARIANTS and r["level"] == "full" and r["scene"] == "toss":
+        if variant in COST_VARIANTS and r["level"] == "full" and r["scene"] == scene:
             groups.setdefault(variant, []).append(r)
     points = []
     for variant, rows in sorted(groups.items()):
@@ -309,7 +310,7 @@ def pareto_plot(records, path):
         ax.set_xlabel("training wall time (s, one thread)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    fig.suptitle("toss, full pipeline: accuracy against training time")
+    fig.suptitle(f"{scene}, full pipeline: accuracy against training time")
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
@@ -352,7 +353,7 @@ def main(argv=None):
     if args.command == "rescore":
         records = [rescore(r, args.cache) for r in records]
     if args.command == "pareto":
-        print(pareto_plot(load_records(args.cache), args.plot))
+        print(pareto_plot(load_records(args.cache), args.plot, args.scenes.split(",")[0]))
         return
     print(table(records))
 
