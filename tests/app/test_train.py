@@ -284,7 +284,8 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
 
 @pytest.mark.parametrize("extra", [["model.scheme=adf-step"], ["model.scheme=adf-step", "model.ablation=no-pds"],
                                    ["model.scheme=adf-step", "train.lambda_carry=1.0", "train.carry_points=16"],
-                                   ["physics.placement=gaussians"], ["train.motion_only=true"]])
+                                   ["physics.placement=box"], ["model.acceleration=rigid"],
+                                   ["model.acceleration=auto", "model.ablation=no-pds"], ["train.motion_only=true"]])
 def test_schemes_and_options_train_and_reload(tiny_scene, tmp_path, extra):
     cfg = load_config(None, TINY + extra)
     _trains_and_reloads(cfg, tiny_scene, tmp_path)

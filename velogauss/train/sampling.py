@@ -6,8 +6,9 @@ over `curriculum` iterations, so the velocity is learned from short integrations
 A scene without motion draws from every frame at once. An iteration may look at several
 training views of its frame's time (`train.views`): the Gaussians' state is computed once
 and seen by several cameras, which pins positions in depth, where one view's gradient is
-blind. Collocation points (VG-TRANSPORT, VG-DIV) are uniform over the scene box, grown by a
-margin, at one uniform time in [0, 1] per iteration: the future is constrained too.
+blind. Collocation points (VG-TRANSPORT, VG-DIV) lie near the moving Gaussians at their
+time (`physics.placement = "gaussians"`) or uniform over the scene box grown by a margin
+("box"), at one uniform time in [0, 1] per iteration: the future is constrained too.
 """
 
 import numpy as np
