@@ -4,11 +4,12 @@
 at `path` (if any), then each override `section.key=value` (the value is read as a TOML
 value; a bare word is taken as a string), then the command-line `flags` (typed values), and
 validates the result with pydantic: each field's type and range (`Field(ge=..., ...)`) is
-written next to it below, and is checked before any training. Unknown sections or keys and
-values of the wrong type or out of range raise ValueError naming the key and where the value
-came from (the file, `--set` or the flag). `to_toml(cfg)` writes a config back (tomli-w);
-`velogauss train` saves it as `RUN_DIR/config.toml`, which is what `eval`, `render`,
-`export` and `--resume` read again.
+written next to it below (the motion networks' sizes, `model.n_patterns` ...
+`model.n_freqs_adf_t`, in `velogauss_core.motion.MotionSizes`, shared with `MotionConfig`),
+and is checked before any training. Unknown sections or keys and values of the wrong type or
+out of range raise ValueError naming the key and where the value came from (the file, `--set`
+or the flag). `to_toml(cfg)` writes a config back (tomli-w); `velogauss train` saves it as
+`RUN_DIR/config.toml`, which is what `eval`, `render`, `export` and `--resume` read again.
 
 The lists of choices are defined once, as `Literal` types (`Ablation`, `Integrator`,
 `Effect`, `Scheme` in velogauss_core.motion; `Placement` here); the command line shows them
@@ -25,7 +26,7 @@ from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
 from velogauss_core.motion import (ABLATIONS, EFFECTS, INTEGRATORS, AccelerationForm, Ablation, Effect, Integrator,
-                                   MotionConfig, Scheme)
+                                   MotionSizes, Scheme)
 
 
 def _int(**bounds):
@@ -61,8 +62,9 @@ class DataConfig:
 
 
 @dataclass(frozen=True, config=_STRICT)
-class ModelConfig:
-    """The representation and the motion model (spec/motion.md, spec/physics.md)."""
+class _ModelChoices:
+    """The first keys of `ModelConfig`, a base of it only so that config.toml lists them
+    before the networks' sizes (a dataclass's inherited fields come first, base by base)."""
 
     # Effects the motion may use, or "auto": the scene's declared effects (scene.json),
     # else every effect.
@@ -77,17 +79,17 @@ class ModelConfig:
     acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
-    # The motion networks' sizes (velogauss_ref.motion.config.MotionConfig, whose defaults
-    # they take; K = 32 is the paper's ablation value).
-    n_patterns: Count = MotionConfig.n_patterns
-    code_dim: Count = MotionConfig.code_dim
-    hidden: Count = MotionConfig.hidden
-    depth: Count = MotionConfig.depth
-    # Positional-encoding frequencies 2^0 ... 2^(n-1): beyond 2^16 float32 sin(2^k x) is noise.
-    n_freqs_x: _int(ge=0, le=16) = MotionConfig.n_freqs_x
-    n_freqs_t: _int(ge=0, le=16) = MotionConfig.n_freqs_t
-    n_freqs_adf_x: _int(ge=0, le=16) = MotionConfig.n_freqs_adf_x
-    n_freqs_adf_t: _int(ge=0, le=16) = MotionConfig.n_freqs_adf_t
+
+
+@dataclass(frozen=True, config=_STRICT)
+class ModelConfig(MotionSizes, _ModelChoices):
+    """The representation and the motion model (spec/motion.md, spec/physics.md).
+
+    Keys in config.toml's order: `_ModelChoices`'s (effects ... sh_degree), the motion
+    networks' sizes with their defaults and ranges (`MotionSizes`, n_patterns ...
+    n_freqs_adf_t, which `MotionConfig` shares), then the fields below.
+    """
+
     integrator: Integrator = "rk2"  # the paper integrates with RK2
     # Largest integration step in normalised time (one frame of 21); a step beyond the whole
     # window [0, 1] would not be a step.

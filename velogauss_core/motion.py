@@ -2,14 +2,17 @@
 
 One frozen `MotionConfig` is shared by `velogauss_ref` and `velogauss_fast`, and one
 `init_motion_params` draws the parameter dict (NumPy arrays; the model converts them to
-tensors). Every list of choices is defined here once, as a `Literal` type and the tuple of
-its values.
+tensors). The networks' sizes are declared once, in `MotionSizes`, which both `MotionConfig`
+and the training config's `[model]` section (`velogauss.config.ModelConfig`) inherit. Every
+list of choices is defined here once, as a `Literal` type and the tuple of its values.
 """
 
-from dataclasses import dataclass
-from typing import Literal, get_args
+from dataclasses import dataclass, fields
+from typing import Annotated, Literal, get_args
 
 import numpy as np
+from annotated_types import Interval
+from pydantic import Strict
 
 from velogauss_core.checks import check_scalar
 from velogauss_core.constants import ACC_POLY_DEGREE, RIGID_OMEGA_INIT
@@ -62,39 +65,63 @@ VelocityKind = Literal["affine", "mlp"]
 VELOCITY_KINDS: tuple[str, ...] = get_args(VelocityKind)
 
 
-@dataclass(frozen=True)
-class MotionConfig:
-    """Sizes of the motion networks and the basis-column masks (spec/motion.md).
+def _int_in(low, high=None):
+    """An integer in [low, high] (no upper bound when `high` is None), bools, floats and strings
+    refused: pydantic enforces both markers on the config's `[model]` keys, and
+    `MotionConfig.__post_init__` reads the `Interval` back for a config built directly."""
+    return Annotated[int, Strict(), Interval(ge=low, le=high)]
 
+
+_Size = _int_in(1)
+# Positional-encoding frequencies 2^0 ... 2^(n-1): beyond 2^16 float32 sin(2^k x) is noise.
+_Freqs = _int_in(0, 16)
+
+
+@dataclass(frozen=True)
+class MotionSizes:
+    """Sizes of the motion networks (spec/motion.md), with their defaults and ranges, declared
+    once: `MotionConfig` and `velogauss.config.ModelConfig` (keys `model.n_patterns`, ...,
+    in this order in config.toml) inherit them.
+
+    n_patterns: K motion patterns (VG-COEF; 32 is the paper's ablation value);
+    code_dim: L, the physics code size (VG-CODE);
+    hidden, depth: width and number of hidden layers of every MLP;
     n_freqs_x: frequencies of gamma(x0) for the code encoder E (VG-CODE);
     n_freqs_t: frequencies of gamma(t) for the time network (VG-COEF; 0 = raw t, which
       extrapolates without periodicity);
-    n_freqs_adf_x, n_freqs_adf_t: frequencies of the ADF inputs (VG-ADF);
-    code_dim: L, the physics code size; n_patterns: K motion patterns;
-    hidden, depth: width and number of hidden layers of every MLP;
+    n_freqs_adf_x, n_freqs_adf_t: frequencies of the ADF inputs (VG-ADF).
+    """
+
+    n_patterns: _Size = 32
+    code_dim: _Size = 16
+    hidden: _Size = 64
+    depth: _Size = 3
+    n_freqs_x: _Freqs = 4
+    n_freqs_t: _Freqs = 0
+    n_freqs_adf_x: _Freqs = 6
+    n_freqs_adf_t: _Freqs = 6
+
+
+@dataclass(frozen=True)
+class MotionConfig(MotionSizes):
+    """The networks' sizes (`MotionSizes`) and the basis-column masks (spec/motion.md).
+
     mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
     acc_mask: None or 12 bools, the acceleration's columns (VG-ACC);
     acc_form: the acceleration's time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID).
     Masks are stored as tuples of bools so the config stays hashable and serialisable.
+    Raises ValueError naming the field for a size outside its range (`MotionSizes`), a mask
+    that is not 12 bools or an unknown `acc_form`.
     """
 
-    n_freqs_x: int = 4
-    n_freqs_t: int = 0
-    n_freqs_adf_x: int = 6
-    n_freqs_adf_t: int = 6
-    code_dim: int = 16
-    n_patterns: int = 32
-    hidden: int = 64
-    depth: int = 3
     mask: tuple[bool, ...] | None = None
     acc_mask: tuple[bool, ...] | None = None
     acc_form: AccelerationForm = "poly"
 
     def __post_init__(self):
-        for name in ("n_freqs_x", "n_freqs_t", "n_freqs_adf_x", "n_freqs_adf_t"):
-            _check_int(name, getattr(self, name), 0)
-        for name in ("code_dim", "n_patterns", "hidden", "depth"):
-            _check_int(name, getattr(self, name), 1)
+        for field in fields(MotionSizes):
+            (bounds,) = (m for m in field.type.__metadata__ if isinstance(m, Interval))
+            _check_int(field.name, getattr(self, field.name), bounds.ge, bounds.le)
         for name in ("mask", "acc_mask"):
             value = getattr(self, name)
             if value is not None:
@@ -187,9 +214,12 @@ def mlp_layers(rng, d_in, hidden, depth, d_out, zero_last=False):
     return layers
 
 
-def _check_int(name, value, low):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+def _check_int(name, value, low, high):
+    """`value` is an integer (not a bool) in [low, high]; `high` None: no upper bound."""
+    if (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low
+            or (high is not None and value > high)):
+        wanted = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{name}: expected an integer {wanted}, got {value!r}")
 
 
 def _check_mask(name, value):

@@ -1,8 +1,11 @@
 """Tests of velogauss/config.py: defaults, TOML files, overrides, and bad values named."""
 
+import dataclasses
+
 import pytest
 
-from velogauss.config import Config, load_config, to_toml
+from velogauss.config import Config, ModelConfig, load_config, to_toml
+from velogauss_core.motion import MotionConfig, MotionSizes
 
 
 def test_defaults_without_file_or_overrides():
@@ -69,3 +72,25 @@ def test_bad_file_is_named(tmp_path):
     path.write_text("[train]\nwarmup = -1\n")
     with pytest.raises(ValueError, match="broken.toml: train.warmup"):
         load_config(path)
+
+
+def test_motion_sizes_are_declared_once():
+    # The networks' sizes, their defaults and ranges live in MotionSizes alone (issue 9):
+    # the [model] keys and MotionConfig carry its very fields, in its order.
+    sizes = dataclasses.fields(MotionSizes)
+    for cls in (ModelConfig, MotionConfig):
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        assert [fields[f.name].type for f in sizes] == [f.type for f in sizes]
+        assert [fields[f.name].default for f in sizes] == [f.default for f in sizes]
+    names = [f.name for f in dataclasses.fields(ModelConfig)]
+    first = names.index(sizes[0].name)
+    assert names[first:first + len(sizes)] == [f.name for f in sizes]  # config.toml's key order
+
+
+@pytest.mark.parametrize("override", ["model.n_freqs_x=17", "model.n_freqs_x=-1", "model.n_freqs_x=true",
+                                      "model.hidden=0", "model.depth=2.0"])
+def test_motion_size_out_of_range_is_named(override):
+    # The ranges MotionSizes declares reach the config's validation, with the key and its source.
+    key = override.partition("=")[0]
+    with pytest.raises(ValueError, match=f"^--set: {key.replace('.', '[.]')}: "):
+        load_config(None, [override])

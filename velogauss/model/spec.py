@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from velogauss.model.profile import MotionProfile
 # `Scheme` ("integrate" (a), "adf-step" (b)) is defined once in velogauss_core.motion, where
 # the config (which this package imports) can type its key.
-from velogauss_core.motion import Integrator, MotionConfig, Scheme, VelocityKind
+from velogauss_core.motion import Integrator, MotionConfig, MotionSizes, Scheme, VelocityKind
 
 
 @dataclass(frozen=True)
@@ -107,8 +107,8 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
     velocity = switches.velocity if moving else None
     adf = moving and switches.adf
     clamp = model_cfg.adf_clamp_time and model_cfg.ablation != "deform-only"
-    sizes = {f.name: getattr(model_cfg, f.name) for f in dataclasses.fields(MotionConfig)
-             if f.name not in ("mask", "acc_mask", "acc_form")}
+    # The sizes are MotionSizes's fields, which ModelConfig inherits (no list of names here).
+    sizes = {f.name: getattr(model_cfg, f.name) for f in dataclasses.fields(MotionSizes)}
     carry = model_cfg.scheme == "adf-step" and adf and velocity is not None
     return MotionSpec(
         scheme="adf-step" if carry else "integrate",
