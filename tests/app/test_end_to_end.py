@@ -47,8 +47,8 @@ def test_learned_velocity_matches_the_ground_truth(spin_run):
     # learn the spin to 0.072-0.082 observed and 0.077-0.092 in the future (box collocation:
     # 0.081-0.092 and 0.081-0.107); the bounds leave about 1.6x the worst seed, so a
     # regression in the motion model or the training shows here.
-    assert err["observed"]["relative_l2"] < 0.15
-    assert err["future"]["relative_l2"] < 0.18
+    assert err["observed"]["relative_l2"] < 0.13
+    assert err["future"]["relative_l2"] < 0.15
 
 
 def test_extrapolation_beats_holding_still(spin_run):
