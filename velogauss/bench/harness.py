@@ -77,6 +77,14 @@ def regenerate_command(command, *options, quick=False, device="cpu", threads=0):
     return " ".join(parts + ([f"--threads {threads}"] if threads else []))
 
 
+def write_table_section(out_path, section, paragraphs, regenerate, table_lines):
+    """`write_section` in the layout the step benchmarks share: the section heading, the
+    `paragraphs`, the machine, the `regenerate` command line, then the table's lines."""
+    text = "\n\n".join([section, *paragraphs, f"Machine: {machine()}.", f"Regenerate: `{regenerate}`",
+                         "\n".join(table_lines)])
+    write_section(out_path, section, text)
+
+
 def write_section(out_path, section, text):
     """Replace (or append) the `section` ("## ...") of out_path with `text`, leaving the others alone."""
     old = ""

@@ -96,7 +96,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=F
     iterations = iterations or (QUICK_ITERATIONS if quick else ITERATIONS)
     if device != "cpu":
         raise ValueError(f"--device: the step profile runs on the CPU; expected cpu, got {device!r}")
-    from velogauss.bench.harness import machine, regenerate_command, write_section
+    from velogauss.bench.harness import regenerate_command, write_table_section
 
     result = measure(iterations, quick)
     step = result["rows"][0][2]
@@ -105,19 +105,14 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=F
         lines.append(f"| {'&nbsp;&nbsp;' * indent}{label} | {1e3 * seconds:.2f} | {100 * seconds / step:.0f}% "
                      f"| {calls:g} |")
     options = [] if iterations == (QUICK_ITERATIONS if quick else ITERATIONS) else [f"--iterations {iterations}"]
-    text = "\n\n".join([
-        SECTION,
+    write_table_section(out_path, SECTION, [
         f"cProfile over {iterations} iterations of the default training on the default scene "
         f"({result['gaussians']} Gaussians; motion, ADF and full physics loss on; velogauss's default threads), "
         "cumulative time per iteration of the functions doing each part. Indented rows are parts of the row "
         "above; a row's remainder is the Python and torch work between them. Iteration time: "
         f"{1e3 * result['unprofiled_s']:.1f} ms unprofiled, {1e3 * result['profiled_s']:.1f} ms profiled "
         "(cProfile's cost inflates Python-heavy rows).",
-        f"Machine: {machine()}.",
-        f"Regenerate: `{regenerate_command(COMMAND, *options, quick=quick)}`",
-        "\n".join(lines),
-    ])
-    write_section(out_path, SECTION, text)
+    ], regenerate_command(COMMAND, *options, quick=quick), lines)
     return result
 
 

@@ -122,7 +122,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=
     """Measure (`measure`) and write the "## Training step: before / after" section."""
     if device != "cpu":
         raise ValueError(f"--device: the step ratio runs on the CPU; expected cpu, got {device!r}")
-    from velogauss.bench.harness import machine, regenerate_command, write_section
+    from velogauss.bench.harness import regenerate_command, write_table_section
 
     default_rounds, default_iterations = (QUICK_ROUNDS, QUICK_ITERATIONS) if quick else (ROUNDS, ITERATIONS)
     rounds, iterations = rounds or default_rounds, iterations or default_iterations
@@ -135,8 +135,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=
     lines = ["| round | before (ms per iteration) | after (ms per iteration) | before / after |", "|---:|---:|---:|---:|"]
     for k, ((b, a), ratio) in enumerate(zip(result["rounds"], result["ratios"]), 1):
         lines.append(f"| {k} | {1e3 * b:.1f} | {1e3 * a:.1f} | {ratio:.2f} |")
-    text = "\n\n".join([
-        SECTION,
+    write_table_section(out_path, SECTION, [
         f"A training iteration (`_Loop.step`) of the default training on the default scene ({result['gaussians']} "
         f"Gaussians; motion, ADF and full physics loss on; one torch thread) with `{MODULE}` as at "
         f"`{revision}` (before) and as now (after), in {rounds} alternating rounds of {iterations} iterations "
@@ -146,11 +145,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=
         + ", ".join(f"{name} {diff:.1e} ({scale:.1e})" for name, (diff, scale) in agreement.items())
         + ". The divergence is a sum of grad v's diagonal terms, each much larger than it this early in "
         "training, so its difference is the rounding of those terms.",
-        f"Machine: {machine()}.",
-        f"Regenerate: `{regenerate_command(COMMAND, *options, quick=quick)}`",
-        "\n".join(lines),
-    ])
-    write_section(out_path, SECTION, text)
+    ], regenerate_command(COMMAND, *options, quick=quick), lines)
     return result
 
 
