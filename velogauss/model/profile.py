@@ -13,8 +13,7 @@ rotation, gravity, stretch, shear, static) and whether its motion is incompressi
   whose material acceleration (centripetal, A² x) is non-zero even at constant
   coefficients. Its columns follow spec/physics.md: translation columns when the velocity
   is translation-only and the acceleration a polynomial, else all 12 (A² leaves the
-  velocity's span). Its time dependence:
-  a polynomial in t (VG-ACC) by default, or a rigid body's (VG-ACC-RIGID: constant spin,
+  velocity's span). Its time dependence: a polynomial in t (VG-ACC) by default, or a rigid body's (VG-ACC-RIGID: constant spin,
   centre under a constant acceleration), as the config's `model.acceleration` says ("auto":
   rigid when the scene's motion is rigid, i.e. translation, rotation and gravity only).
 - divergence loss (VG-DIV): only for incompressible motion.
@@ -60,7 +59,8 @@ def resolve_profile(effects, incompressible, metadata=None, acceleration="poly")
     "auto" takes the scene's declaration from `metadata` (a parsed scene.json), else every
     effect and incompressible motion (what NVFi-style methods assume for real scenes).
     `acceleration` (config `model.acceleration`, default "poly"): "poly" (VG-ACC), "rigid"
-    (VG-ACC-RIGID), or "auto", rigid when the motion effects are rigid ones, else poly. ValueError when "rigid" is asked of a scene that stretches or shears.
+    (VG-ACC-RIGID), or "auto", rigid when the motion effects are rigid ones, else poly.
+    ValueError when "rigid" is asked of a scene that stretches or shears.
     """
     if effects == "auto":
         effects = tuple((metadata or {}).get("effects", EFFECTS))

@@ -30,8 +30,9 @@ def acceleration_field(params, x, t, cfg):
 
 def acceleration_coefficients(params, t, m, cfg):
     """alpha (N, 12), masked by cfg.acc_mask, for mixing weights m (N, K): m sum_d Q_d t^d
-    (VG-ACC) or rigid_patterns(m R, t) (VG-ACC-RIGID). The coefficients `acceleration_field` applies Phi(x) to, for
-    callers that already hold m at the points (the physics residuals share it with the velocity)."""
+    (VG-ACC) or rigid_patterns(m R, t) (VG-ACC-RIGID). The coefficients `acceleration_field`
+    applies Phi(x) to, for callers that already hold m at the points (the physics residuals
+    share it with the velocity)."""
     check_time("t", t)
     check_array("m", m, (None, cfg.n_patterns))
     if cfg.acc_form == "poly":
