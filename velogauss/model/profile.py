@@ -13,9 +13,10 @@ rotation, gravity, stretch, shear, static) and whether its motion is incompressi
   whose material acceleration (centripetal, A² x) is non-zero even at constant
   coefficients. Its columns follow spec/physics.md: translation columns when the velocity
   is translation-only and the acceleration a polynomial, else all 12 (A² leaves the
-  velocity's span). Its time dependence: a polynomial in t (VG-ACC) by default, or a rigid body's (VG-ACC-RIGID: constant spin,
-  centre under a constant acceleration), as the config's `model.acceleration` says ("auto":
-  rigid when the scene's motion is rigid, i.e. translation, rotation and gravity only).
+  velocity's span). Its time dependence: a polynomial in t (VG-ACC) by default, or a
+  rigid body's (VG-ACC-RIGID: constant spin, centre under a constant acceleration), as the
+  config's `model.acceleration` says ("auto": rigid when the scene's motion is rigid, i.e.
+  translation, rotation and gravity only).
 - divergence loss (VG-DIV): only for incompressible motion.
 - a scene with no motion effect (`static` alone) builds no velocity at all.
 """
