@@ -174,8 +174,8 @@ class PhysicsConfig:
     # Where the collocation points lie: "box" uniform in the grown box, "gaussians" near the
     # moving Gaussians at the collocation time (where the residual binds the particles). Near
     # the Gaussians the residual fits the acceleration to the bodies, not to empty space: on
-    # toss the future velocity error fell from 0.217 to 0.165 and extrapolation rose 0.6 dB,
-    # grow improved, shear did not change, for ~10 % more time (benchmarks/FIDELITY.md).
+    # toss the future velocity error fell from 0.217 to 0.164 and extrapolation rose 0.6 dB,
+    # grow improved, shear did not change, for 11-13 % more time (benchmarks/FIDELITY.md).
     placement: Placement = "gaussians"
     # Placement "gaussians": standard deviation of the normal offset, as a fraction of the box
     # diagonal (0: exactly at the means).
