@@ -26,7 +26,7 @@ from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
 from velogauss_core.motion import (ABLATIONS, EFFECTS, INTEGRATORS, AccelerationForm, Ablation, Effect, Integrator,
-                                   MotionSizes, Scheme)
+                                   MotionSizes, PatternForm, Scheme)
 
 
 def _int(**bounds):
@@ -77,6 +77,12 @@ class _ModelChoices:
     # rigid (translation, rotation, gravity), else poly. "poly" stays the default: "rigid"
     # helped multi and cost toss 0.7 dB of extrapolation (benchmarks/FIDELITY.md, section 6).
     acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
+    # How the motion patterns depend on time (spec/motion.md): "mlp" the time network of
+    # VG-COEF, "rigid" bodies spinning at a constant rate about a centre under a constant
+    # acceleration (VG-COEF-RIGID), or "auto": rigid when the effects are rigid (translation,
+    # rotation, gravity), else mlp. "auto" is the default: on toss, rigid took the future
+    # velocity error from 0.164 to 0.016 (benchmarks/FIDELITY.md, section 1).
+    patterns: Union[Literal["auto"], PatternForm] = "auto"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
 

@@ -59,6 +59,12 @@ AccelerationForm = Literal["poly", "rigid"]
 # at a constant rate whose centre falls under a constant acceleration (VG-ACC-RIGID).
 ACC_FORMS: tuple[str, ...] = get_args(AccelerationForm)
 
+PatternForm = Literal["mlp", "rigid"]
+# How the motion patterns P(t) depend on time (spec/motion.md): "mlp" the time network of
+# VG-COEF, "rigid" a body spinning at a constant rate about a centre that moves under a
+# constant acceleration (VG-COEF-RIGID).
+PATTERN_FORMS: tuple[str, ...] = get_args(PatternForm)
+
 VelocityKind = Literal["affine", "mlp"]
 # How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP
 # v(gamma(x), t) (PDS off, "no-pds"); a model without velocity has None.
@@ -108,15 +114,25 @@ class MotionConfig(MotionSizes):
 
     mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
     acc_mask: None or 12 bools, the acceleration's columns (VG-ACC);
-    acc_form: the acceleration's time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID).
+    acc_form: the acceleration's time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID);
+    pattern_form: the motion patterns' time dependence, "mlp" (VG-COEF) or "rigid"
+      (VG-COEF-RIGID);
+    max_time: the end of the observed window in normalised time, in (0, 1], where
+      VG-COEF-RIGID's last knot sits;
+    rigid_knots: VG-COEF-RIGID's knots per centre, evenly spaced over [0, max_time]: 3 (a
+      centre under a constant acceleration) or 2 (a centre drifting uniformly).
     Masks are stored as tuples of bools so the config stays hashable and serialisable.
     Raises ValueError naming the field for a size outside its range (`MotionSizes`), a mask
-    that is not 12 bools or an unknown `acc_form`.
+    that is not 12 bools, an unknown `acc_form` or `pattern_form`, a max_time outside (0, 1]
+    or rigid_knots other than 2 or 3.
     """
 
     mask: tuple[bool, ...] | None = None
     acc_mask: tuple[bool, ...] | None = None
     acc_form: AccelerationForm = "poly"
+    pattern_form: PatternForm = "mlp"
+    max_time: float = 1.0
+    rigid_knots: int = 3
 
     def __post_init__(self):
         for field in fields(MotionSizes):
@@ -128,6 +144,12 @@ class MotionConfig(MotionSizes):
                 object.__setattr__(self, name, _check_mask(name, value))
         if self.acc_form not in ACC_FORMS:
             raise ValueError(f"acc_form: expected one of {ACC_FORMS}, got {self.acc_form!r}")
+        if self.pattern_form not in PATTERN_FORMS:
+            raise ValueError(f"pattern_form: expected one of {PATTERN_FORMS}, got {self.pattern_form!r}")
+        if not 0.0 < check_scalar("max_time", self.max_time) <= 1.0:
+            raise ValueError(f"max_time: expected a time in (0, 1], got {self.max_time!r}")
+        if self.rigid_knots not in (2, 3) or isinstance(self.rigid_knots, bool):
+            raise ValueError(f"rigid_knots: expected 2 or 3, got {self.rigid_knots!r}")
 
 
 def network_shapes(cfg: MotionConfig) -> dict[str, tuple[int, int]]:
@@ -150,14 +172,16 @@ def init_motion_params(rng, cfg):
     `network_shapes`):
       "code": E, 3 (1 + 2 n_freqs_x) -> hidden^depth -> code_dim;
       "mix":  [(A (code_dim, K), c (K,))], the pattern-mixing softmax of VG-COEF;
-      "time": 1 (1 + 2 n_freqs_t) -> hidden^depth -> K * 12, the motion patterns P(t);
+      "time": 1 (1 + 2 n_freqs_t) -> hidden^depth -> K * 12, the motion patterns P(t), or
+              with cfg.pattern_form "rigid" the array B (K, 3 + 3 rigid_knots) of
+              VG-COEF-RIGID: each pattern's spin and its centre at the knots;
       "acc":  the acceleration of each pattern: Q (ACC_POLY_DEGREE + 1, K, 12), the polynomial
               of VG-ACC, or with cfg.acc_form "rigid" R (K, 12), each pattern's spin, linear
               acceleration, centre and centre velocity at t = 0 (VG-ACC-RIGID);
       "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10.
     Hidden layers use PyTorch's default Linear initialisation (uniform within
     +-1/sqrt(fan_in)). Three heads start at zero, so a fresh model is the still canonical
-    scene: the time network's last layer (no velocity), Q (no acceleration) and the ADF's
+    scene: the time network's last layer (no velocity; B = 0 under "rigid"), Q (no acceleration) and the ADF's
     last layer (identity correction). Their gradients are not zero, so all of them learn.
     The rigid form starts with a small random spin (RIGID_OMEGA_INIT): its acceleration is
     quadratic in the spin, whose gradient at exactly zero would be zero.
@@ -172,7 +196,7 @@ def init_motion_params(rng, cfg):
     return {
         "code": mlp("code"),
         "mix": [(rng.standard_normal((L, K)) / np.sqrt(L), np.zeros(K))],
-        "time": mlp("time", zero_last=True),
+        "time": mlp("time", zero_last=True) if cfg.pattern_form == "mlp" else np.zeros((K, 3 + 3 * cfg.rigid_knots)),
         "acc": _acceleration_init(rng, cfg),
         "adf": mlp("adf", zero_last=True),
     }

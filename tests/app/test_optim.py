@@ -18,14 +18,15 @@ TRAIN = TrainConfig(iterations=1000, warmup=200)
 EXTENT = 2.5
 
 
-def _model(effects=("translation", "gravity")):
-    cfg = Config(model=ModelConfig(**SMALL))
+def _model(effects=("translation", "gravity"), **model):
+    cfg = Config(model=ModelConfig(**SMALL, **model))
     points = np.random.default_rng(0).uniform(-1, 1, (20, 3))
-    return build_model(cfg, resolve_profile(effects, False), points, None, np.random.default_rng(0))
+    profile = resolve_profile(effects, False, patterns=cfg.model.patterns)
+    return build_model(cfg, profile, points, None, np.random.default_rng(0))
 
 
 def test_every_parameter_is_in_exactly_one_named_group():
-    model = _model()
+    model = _model(patterns="mlp")
     opt = make_optimizer(model, TRAIN, EXTENT)
     names = [g["name"] for g in opt.param_groups]
     assert names == list(FIELDS) + ["motion", "acc"]
@@ -34,8 +35,19 @@ def test_every_parameter_is_in_exactly_one_named_group():
     assert opt.param_groups[-1]["params"] == [model.motion.acc]
 
 
+@pytest.mark.parametrize("effects", [("translation", "gravity"), ("translation",)])
+def test_rigid_patterns_share_the_acceleration_rate(effects):
+    # VG-COEF-RIGID's B holds spins and world positions themselves, as Q holds
+    # accelerations: both take the larger rate, with or without an acceleration in the scene.
+    model = _model(effects, patterns="rigid")
+    groups = {g["name"]: g["params"] for g in make_optimizer(model, TRAIN, EXTENT).param_groups}
+    acc = [model.motion.acc] if model.spec.acceleration else []
+    assert groups["acc"] == acc + [model.motion.time]
+    assert all(p is not q for p in groups["motion"] for q in groups["acc"])
+
+
 def test_no_acceleration_group_without_acceleration_and_no_motion_groups_when_static():
-    assert [g["name"] for g in make_optimizer(_model(("translation",)), TRAIN, EXTENT).param_groups][-1] == "motion"
+    assert [g["name"] for g in make_optimizer(_model(("translation",), patterns="mlp"), TRAIN, EXTENT).param_groups][-1] == "motion"
     assert [g["name"] for g in make_optimizer(_model(("static",)), TRAIN, EXTENT).param_groups] == list(FIELDS)
 
 

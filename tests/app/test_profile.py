@@ -49,11 +49,31 @@ def test_rigid_acceleration_refuses_a_deforming_scene(effects):
         resolve_profile(effects, True, acceleration="rigid")
 
 
-def test_a_profile_saved_before_the_rigid_form_reads_as_polynomial():
-    # Checkpoints store dataclasses.asdict(profile); those written before acc_form existed lack it.
-    saved = dataclasses.asdict(resolve_profile(("rotation",), True, acceleration="poly"))
-    del saved["acc_form"]
-    assert profile_from_dict(saved).acc_form == "poly"
+@pytest.mark.parametrize("effects, auto", [
+    (("translation", "rotation", "gravity"), "rigid"), (("translation",), "rigid"), (("rotation", "static"), "rigid"),
+    (("stretch",), "mlp"), (("translation", "shear"), "mlp"), (("static",), "mlp"),
+])
+def test_pattern_form_auto_is_rigid_exactly_for_rigid_motion(effects, auto):
+    assert resolve_profile(effects, True, patterns="auto").pattern_form == auto
+    assert resolve_profile(effects, True).pattern_form == "mlp"  # the default of the function
+    assert resolve_profile(effects, True, patterns="mlp").pattern_form == "mlp"
+    # The centre accelerates (a third knot) only under gravity.
+    assert resolve_profile(effects, True, patterns="auto").rigid_knots == (3 if "gravity" in effects else 2)
+
+
+@pytest.mark.parametrize("effects", [("stretch",), ("rotation", "shear")])
+def test_rigid_patterns_refuse_a_deforming_scene(effects):
+    with pytest.raises(ValueError, match=r"^model\.patterns: 'rigid' cannot follow"):
+        resolve_profile(effects, True, patterns="rigid")
+
+
+def test_a_profile_saved_before_the_rigid_forms_reads_as_polynomial_and_mlp():
+    # Checkpoints store dataclasses.asdict(profile); those written before acc_form and
+    # pattern_form existed lack them, and used the polynomial and the time network.
+    saved = dataclasses.asdict(resolve_profile(("rotation",), True, acceleration="rigid", patterns="rigid"))
+    del saved["acc_form"], saved["pattern_form"]
+    restored = profile_from_dict(saved)
+    assert restored.acc_form == "poly" and restored.pattern_form == "mlp"
 
 
 def test_rigid_is_six_columns_affine_is_twelve():

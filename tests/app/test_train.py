@@ -95,6 +95,11 @@ def test_a_schedule_too_short_for_its_curriculum_warns_naming_the_keys():
         loop.warn_short_schedule(load_config(None, ["train.iterations=2000"]).train)
 
 
+# Tests that set the time network's last layer by hand (VG-COEF), on a scene whose rigid
+# effects would otherwise give it rigid patterns (VG-COEF-RIGID).
+MLP_PATTERNS = ["model.patterns=mlp"]
+
+
 def _model(tiny_scene, overrides=()):
     cfg = load_config(None, TINY + list(overrides))
     profile = scene_profile(cfg, tiny_scene.metadata)
@@ -152,7 +157,7 @@ def test_densify_respects_the_gaussian_budget(tiny_scene):
 
 
 def test_static_detection(tiny_scene):
-    cfg, model = _model(tiny_scene)
+    cfg, model = _model(tiny_scene, MLP_PATTERNS)
     # A fresh model is still (zero velocity and ADF heads): everything is static.
     assert not detect_moving(model, 0.75, 1e-4).any()
     # Translation w1 = 1 everywhere: every particle moves 0.75 by t = 0.75.
@@ -184,7 +189,7 @@ def test_pixel_footprint_is_depth_over_focal_in_the_closest_camera():
 
 
 def test_static_particles_are_rendered_canonical(tiny_scene):
-    cfg, model = _model(tiny_scene)
+    cfg, model = _model(tiny_scene, MLP_PATTERNS)
     with torch.no_grad():
         model.motion.time[-1].copy_(torch.tensor([1.0] + [0.0] * 11).repeat(cfg.model.n_patterns))
     moving = torch.zeros(len(model.gaussians), dtype=torch.bool)
@@ -266,7 +271,7 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
 
 
 def test_particle_velocity_keeps_the_start_code(tiny_scene):
-    cfg, model = _model(tiny_scene)
+    cfg, model = _model(tiny_scene, MLP_PATTERNS)
     with torch.no_grad():
         last = model.motion.time[-1]
         last.copy_(torch.randn(last.shape, generator=torch.Generator().manual_seed(0)))
@@ -285,7 +290,8 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
 @pytest.mark.parametrize("extra", [["model.scheme=adf-step"], ["model.scheme=adf-step", "model.ablation=no-pds"],
                                    ["model.scheme=adf-step", "train.lambda_carry=1.0", "train.carry_points=16"],
                                    ["physics.placement=box"], ["model.acceleration=rigid"],
-                                   ["model.acceleration=auto", "model.ablation=no-pds"], ["train.motion_only=true"]])
+                                   ["model.acceleration=auto", "model.ablation=no-pds"], ["train.motion_only=true"],
+                                   ["model.patterns=mlp"], ["model.patterns=rigid", "model.scheme=adf-step"]])
 def test_schemes_and_options_train_and_reload(tiny_scene, tmp_path, extra):
     cfg = load_config(None, TINY + extra)
     _trains_and_reloads(cfg, tiny_scene, tmp_path)

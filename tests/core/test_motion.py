@@ -11,7 +11,8 @@ from velogauss_core.motion import MotionConfig, MotionSizes
 
 def test_sizes_come_first_then_masks():
     names = [f.name for f in dataclasses.fields(MotionConfig)]
-    assert names == [f.name for f in dataclasses.fields(MotionSizes)] + ["mask", "acc_mask", "acc_form"]
+    assert names == [f.name for f in dataclasses.fields(MotionSizes)] + ["mask", "acc_mask", "acc_form", "pattern_form", "max_time",
+                                                                   "rigid_knots"]
 
 
 @pytest.mark.parametrize("sizes, message", [
@@ -22,6 +23,10 @@ def test_sizes_come_first_then_masks():
     ({"n_patterns": 4.0}, r"n_patterns: expected an integer >= 1, got 4.0"),
     ({"mask": (True,) * 3}, r"mask: expected 12 booleans"),
     ({"acc_form": "cubic"}, r"acc_form: expected one of"),
+    ({"pattern_form": "spline"}, r"pattern_form: expected one of"),
+    ({"max_time": 0.0}, r"max_time: expected a time in \(0, 1\], got 0.0"),
+    ({"max_time": float("nan")}, r"max_time: expected a finite real scalar"),
+    ({"rigid_knots": 4}, r"rigid_knots: expected 2 or 3, got 4"),
 ])
 def test_bad_values_are_named(sizes, message):
     with pytest.raises(ValueError, match=message):

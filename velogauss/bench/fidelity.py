@@ -8,7 +8,9 @@ the interpolation / extrapolation PSNR and the freeze baseline:
 * `fit` -- the representational floor: the motion model alone (`no-adf` ablation, no
   rendering) fitted to the analytic trajectories of points on the moving bodies' surfaces at
   the observed frame times (t <= max_time), by Adam on the mean squared position error. The
-  positions at successive frame times come from one chained integration (VG-STEP).
+  positions at successive frame times come from one chained integration (VG-STEP). The
+  variant's model overrides apply (e.g. `a-mlp`: the time network), and each parameter group
+  is trained at its training rate relative to the networks'.
   `fit-all` fits every frame time in [0, 1] (what the basis can express at all).
 * `opt` -- the optimisation floor: training from images with the Gaussians initialised on
   the true bodies at t = 0 with their true colours (the generated `points3d.ply`), no
@@ -43,9 +45,10 @@ from velogauss.evaluate import (MOTION_EVAL_TIMES, evaluate_split, freeze_baseli
                                 trajectory_error, velocity_error)
 from velogauss.io_utils import write_text
 from velogauss.model import build_model
-from velogauss.model.profile import resolve_profile
+from velogauss.model.build import scene_profile
 from velogauss.scenes import make_scene
 from velogauss.scenes.catalog import SCENES
+from velogauss.train.optim import make_optimizer
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.motion.trajectory import base_state
@@ -73,6 +76,7 @@ VARIANTS = {
     "a-lr-acc": ["train.lr_acc=0.005"],
     "a-rigid": ["model.acceleration=rigid"],
     "a-rigid-near": ["model.acceleration=rigid", "physics.placement=gaussians"],
+    "a-mlp": ["model.patterns=mlp"],
 }
 # Accuracy against training time (the `pareto` command): each variant changes what one run
 # costs -- views per iteration, iterations, motion patterns K, integrator -- and nothing else.
@@ -148,19 +152,21 @@ def fit_level(name, seed, overrides, all_times, max_time=0.75):
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
     cfg = load_config(None, ["model.ablation=no-adf", *overrides])
-    profile = resolve_profile(cfg.model.effects, cfg.model.incompressible,
-                              {"effects": scene.effects, "incompressible": scene.incompressible})
+    profile = scene_profile(cfg, {"effects": scene.effects, "incompressible": scene.incompressible})
     x0 = moving_surface_points(scene, FIT_POINTS, FIT_SEED)
     model = build_model(cfg, profile, x0, None, rng)
     times = [float(t) for t in FRAME_TIMES if all_times or t <= max_time + 1e-9]
     targets = [torch.as_tensor(scene.position(x0, t, margin=np.inf), dtype=torch.float32) for t in times]
-    params = [p for p in model.motion.parameters()]
-    optimizer = torch.optim.Adam(params, lr=FIT_LR)
+    # The training's motion groups (velogauss.train.optim), each at FIT_LR times its rate
+    # relative to the networks': the larger rate of Q and of rigid patterns carries over.
+    groups = [g for g in make_optimizer(model, cfg.train, 1.0).param_groups if g["name"] in ("motion", "acc")]
+    scale = [FIT_LR * g["lr"] / cfg.train.lr_motion for g in groups]
+    optimizer = torch.optim.Adam([{"params": g["params"]} for g in groups], lr=FIT_LR)
     clock = time.perf_counter()
     g = model.gaussians
     for it in range(FIT_ITERATIONS):
-        for group in optimizer.param_groups:
-            group["lr"] = FIT_LR * 0.01 ** (it / FIT_ITERATIONS)
+        for group, lr in zip(optimizer.param_groups, scale):
+            group["lr"] = lr * 0.01 ** (it / FIT_ITERATIONS)
         loss = _chained_loss(model, g.means.detach(), torch.nn.functional.normalize(g.quats.detach(), dim=1),
                              g.scales.detach(), times, targets)
         optimizer.zero_grad(set_to_none=True)
@@ -343,8 +349,7 @@ def main(argv=None):
     if args.command == "run":
         for name in args.scenes.split(","):
             for level in args.levels.split(","):
-                variants = ["a"] if level.startswith("fit") else args.variants.split(",")
-                for variant in variants:
+                for variant in args.variants.split(","):
                     for seed in (int(s) for s in args.seeds.split(",")):
                         record = run_one(name, level, variant, seed, args.cache, args.set)
                         print(json.dumps({k: record.get(k) for k in ("scene", "level", "variant", "seed",

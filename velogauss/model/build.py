@@ -35,7 +35,8 @@ def model_from_state(cfg, profile: MotionProfile, state: dict) -> VeloGaussModel
 
 def scene_profile(cfg, metadata: dict | None) -> MotionProfile:
     """The `MotionProfile` of the config's effects for a scene with `metadata` (scene.json or None)."""
-    return resolve_profile(cfg.model.effects, cfg.model.incompressible, metadata, cfg.model.acceleration)
+    return resolve_profile(cfg.model.effects, cfg.model.incompressible, metadata, cfg.model.acceleration,
+                           cfg.model.patterns)
 
 
 def profile_from_dict(values: dict) -> MotionProfile:

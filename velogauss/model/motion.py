@@ -37,7 +37,8 @@ class MotionParameters(nn.Module):
     """The trainable motion parameters of a moving scene, laid out as `spec` says.
 
     Attributes (each a ParameterList of W, b, W, b, ...): code (VG-CODE), mix (VG-COEF),
-    time (VG-COEF, velocity "affine"), velocity_mlp (velocity "mlp"), adf (VG-ADF); acc
+    time (VG-COEF, velocity "affine"; VG-COEF-RIGID's B, a Parameter, under
+    spec.config.pattern_form "rigid"), velocity_mlp (velocity "mlp"), adf (VG-ADF); acc
     (VG-ACC's Q or VG-ACC-RIGID's R, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
     weights (`velogauss_core.motion.init_motion_params`, then the velocity MLP's layers).
     """
@@ -51,7 +52,9 @@ class MotionParameters(nn.Module):
         params = params_to_torch(init_motion_params(rng, cfg), torch.float32, "cpu")
         self.code = _parameter_list(params["code"])
         self.mix = _parameter_list(params["mix"])
-        if spec.velocity == "affine":
+        if spec.velocity == "affine" and cfg.pattern_form == "rigid":
+            self.time = nn.Parameter(params["time"])
+        elif spec.velocity == "affine":
             self.time = _parameter_list(params["time"])
         elif spec.velocity == "mlp":
             d_in, d_out = network_shapes(cfg)["velocity_mlp"]
@@ -70,8 +73,9 @@ class MotionParameters(nn.Module):
         acc = self.acc if spec.acceleration else ref.new_zeros(ACC_POLY_DEGREE + 1, spec.config.n_patterns, N_BASIS)
         out = {"code": _layers(self.code), "mix": _layers(self.mix), "acc": acc}
         for name in ("time", "velocity_mlp", "adf"):
-            if hasattr(self, name):
-                out[name] = _layers(getattr(self, name))
+            value = getattr(self, name, None)
+            if value is not None:
+                out[name] = value if isinstance(value, nn.Parameter) else _layers(value)
         return out
 
 

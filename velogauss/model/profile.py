@@ -17,6 +17,10 @@ rotation, gravity, stretch, shear, static) and whether its motion is incompressi
   rigid body's (VG-ACC-RIGID: constant spin, centre under a constant acceleration), as the
   config's `model.acceleration` says ("auto": rigid when the scene's motion is rigid, i.e.
   translation, rotation and gravity only).
+- motion patterns: a time network (VG-COEF), or for a scene whose motion is rigid, rigid
+  bodies under a constant acceleration (VG-COEF-RIGID), as the config's `model.patterns`
+  says ("auto": rigid when the scene's motion is rigid). Their centres accelerate (3 knots)
+  only when the scene declares gravity; otherwise they drift uniformly (2 knots).
 - divergence loss (VG-DIV): only for incompressible motion.
 - a scene with no motion effect (`static` alone) builds no velocity at all.
 """
@@ -36,8 +40,10 @@ class MotionProfile:
     effects: the resolved effect list; moving: any motion at all; mask: 12 bools, the
     velocity's basis columns; acceleration: the VG-ACC term is built; acc_mask: 12 bools,
     its columns; acc_form: its time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID);
-    divergence: the VG-DIV loss is used. acc_form defaults to "poly", what every checkpoint
-    saved before the rigid form existed used.
+    divergence: the VG-DIV loss is used; pattern_form: the motion patterns' time dependence,
+    "mlp" (VG-COEF) or "rigid" (VG-COEF-RIGID); rigid_knots: VG-COEF-RIGID's knots per
+    centre, 3 (under gravity) or 2 (uniform drift). acc_form defaults to "poly" and pattern_form
+    to "mlp", what every checkpoint saved before the rigid forms existed used.
     """
 
     effects: tuple
@@ -47,6 +53,8 @@ class MotionProfile:
     acc_mask: tuple
     divergence: bool
     acc_form: str = "poly"
+    pattern_form: str = "mlp"
+    rigid_knots: int = 3
 
     @property
     def n_columns(self):
@@ -54,14 +62,16 @@ class MotionProfile:
         return sum(self.mask)
 
 
-def resolve_profile(effects, incompressible, metadata=None, acceleration="poly"):
-    """The `MotionProfile` of `effects` / `incompressible` / `acceleration` ("auto" or explicit values).
+def resolve_profile(effects, incompressible, metadata=None, acceleration="poly", patterns="mlp"):
+    """The `MotionProfile` of `effects` / `incompressible` / `acceleration` / `patterns` ("auto" or explicit values).
 
     "auto" takes the scene's declaration from `metadata` (a parsed scene.json), else every
     effect and incompressible motion (what NVFi-style methods assume for real scenes).
     `acceleration` (config `model.acceleration`, default "poly"): "poly" (VG-ACC), "rigid"
     (VG-ACC-RIGID), or "auto", rigid when the motion effects are rigid ones, else poly.
-    ValueError when "rigid" is asked of a scene that stretches or shears.
+    `patterns` (config `model.patterns`, default "mlp" here, what checkpoints before it used):
+    "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), or "auto", rigid when the motion effects are
+    rigid ones, else mlp. ValueError when "rigid" is asked of a scene that stretches or shears.
     """
     if effects == "auto":
         effects = tuple((metadata or {}).get("effects", EFFECTS))
@@ -75,9 +85,10 @@ def resolve_profile(effects, incompressible, metadata=None, acceleration="poly")
     moving = bool(groups)
     has_acceleration = moving and ("gravity" in effects or bool(groups - {"translation"}))
     rigid = groups <= RIGID_EFFECTS
-    if acceleration == "rigid" and not rigid:
-        raise ValueError(f"model.acceleration: 'rigid' cannot follow the effects {sorted(groups - RIGID_EFFECTS)} "
-                         "(a rigid body neither stretches nor shears); use 'poly' or 'auto'")
+    for key, value, other in (("acceleration", acceleration, "poly"), ("patterns", patterns, "mlp")):
+        if value == "rigid" and not rigid:
+            raise ValueError(f"model.{key}: 'rigid' cannot follow the effects {sorted(groups - RIGID_EFFECTS)} "
+                             f"(a rigid body neither stretches nor shears); use '{other}' or 'auto'")
     form = ("rigid" if rigid else "poly") if acceleration == "auto" else acceleration
     form = form if has_acceleration else "poly"
     if not has_acceleration:
@@ -90,7 +101,11 @@ def resolve_profile(effects, incompressible, metadata=None, acceleration="poly")
         acc_mask = (True,) * 12
     return MotionProfile(effects=effects, moving=moving, mask=mask, acceleration=has_acceleration,
                          acc_mask=acc_mask, divergence=moving and bool(incompressible),
-                         acc_form=form)
+                         acc_form=form, pattern_form=("rigid" if rigid and moving else "mlp")
+                         if patterns == "auto" else patterns,
+                         # Without gravity nothing accelerates a body's centre: it drifts
+                         # uniformly, and a third knot would only let noise bend its path.
+                         rigid_knots=3 if "gravity" in effects else 2)
 
 
 def _columns(groups):

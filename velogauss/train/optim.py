@@ -2,10 +2,12 @@
 surgery that densification needs.
 
 Groups: one per Gaussian field (means, log_scales, quats, opacity_logits, sh_dc, sh_rest),
-one for the motion networks and one for the acceleration polynomial Q (VG-ACC). Q gets its
-own, larger rate: Adam moves a parameter by about its rate per step, and Q's entries must
-reach |v|²/L (a spin of 4 rad per unit time has centripetal coefficients of 16), where
-the networks' weights stay O(1). Means and motion decay exponentially from their initial
+one for the motion networks and one, named "acc", for the arrays that hold physical
+quantities directly: the acceleration Q (VG-ACC) and the rigid motion patterns B
+(VG-COEF-RIGID: spins and centres). These get their own, larger rate: Adam moves a parameter
+by about its rate per step, Q's entries must reach |v|²/L (a spin of 4 rad per unit time has
+centripetal coefficients of 16) and B's are spins and world positions of order 1, where a
+network's weights stay O(1) and its width scales its output. Means and motion decay exponentially from their initial
 to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
 camera extent, as in 3DGS. The motion rate runs its decay from the end of the warm-up.
 """
@@ -28,6 +30,8 @@ def make_optimizer(model, train_cfg, extent):
     groups = [{"params": [getattr(model.gaussians, name)], "lr": lrs[name], "name": name} for name in FIELDS]
     if model.motion is not None:
         acc = [model.motion.acc] if model.spec.acceleration else []
+        if model.spec.velocity == "affine" and model.spec.config.pattern_form == "rigid":
+            acc.append(model.motion.time)
         networks = [p for p in model.motion.parameters() if all(p is not a for a in acc)]
         groups.append({"params": networks, "lr": t.lr_motion, "name": "motion"})
         if acc:

@@ -5,7 +5,7 @@ import numpy as np
 
 from velogauss_ref.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_ref.motion.code import physics_code
-from velogauss_ref.motion.coefficients import coefficients, mixing_weights, motion_patterns
+from velogauss_ref.motion.coefficients import coefficients, mixing_weights, motion_patterns, rigid_velocity_patterns
 from velogauss_ref.motion.velocity import mlp_velocity, velocity, velocity_field
 from velogauss.walkthrough.figures import COLUMN_COLOURS, COLUMN_LABELS, new_figure, save
 from velogauss.walkthrough.printing import Section, session
@@ -89,6 +89,36 @@ def coefficients_section(figures):
                  "P = motion_patterns(params, t, cfg)  # (K, 12)", {"P": P},
                  "w = coefficients(params, t, z, cfg)", {"w": coefficients(params, t, z, CFG), "m @ P": m @ P}),
          _coefficients_figure(figures, params, z)],
+    )
+
+
+def rigid_coefficients_section(figures):
+    """VG-COEF-RIGID: a thrown, spinning body as one pattern, inside the window and past it."""
+    omega, g, c0, u = np.array([0.0, 0.0, 2.0]), np.array([0.0, 0.0, -8.0]), np.array([-0.5, 0.0, -0.5]), \
+        np.array([1.0, 0.0, 4.0])
+    window = 0.75
+
+    def centre(t):  # the body's true centre
+        return c0 + u * t + 0.5 * g * t * t
+
+    B = np.concatenate([omega, centre(0.0), centre(window / 2), centre(window)])[None, :]
+    x = np.array([[0.2, 0.5, 0.3]])
+    steps = []
+    for t in (0.5, 1.0):
+        v = velocity(x, rigid_velocity_patterns(B, t, window))
+        steps += [f"v = velocity(x, rigid_velocity_patterns(B, t={t}, max_time={window}))",
+                  {"v": v, "ω × (x − c(t)) + ċ(t)": np.cross(omega, x - centre(t)) + u + g * t}]
+    return Section(
+        "For a scene whose motion is rigid (translation, rotation, gravity), `model.patterns = auto` "
+        "replaces the time network by rigid bodies: each pattern is a constant spin ω and a centre "
+        "c(t) given by its positions at knots in the observed window (0, T/2, T under gravity; 0 and "
+        "T when nothing accelerates the centre), with `v = ω × (x − c(t)) + ċ(t)`. What the window "
+        "fixes continues past it as the body would. The example is the default scene's kind of "
+        "motion: a spin of 2 about z while the centre is thrown from (−0.5, 0, −0.5) at (1, 0, 4) "
+        "under g = (0, 0, −8), stored as its centre at t = 0, 0.375 and 0.75, read inside the "
+        "window (t = 0.5) and past it (t = 1).",
+        [session({"B": B, "x": x}, "P = rigid_velocity_patterns(B, t, max_time)  # translation | rotation | 0 | 0",
+                 {"P(0.5)": rigid_velocity_patterns(B, 0.5, window)}, *steps)],
     )
 
 
@@ -195,4 +225,5 @@ def mlp_velocity_section(figures):
 
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
+            "VG-COEF-RIGID": rigid_coefficients_section,
             "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-VEL-MLP": mlp_velocity_section}

@@ -1,8 +1,11 @@
 """Basis coefficients w(t, z) from K motion patterns, in torch.
 
-Twin of `velogauss_ref.motion.coefficients` (spec/motion.md, VG-COEF). The time network
-runs once per time for all K patterns; particles differ only through their mixing weights.
+Twin of `velogauss_ref.motion.coefficients` (spec/motion.md, VG-COEF and VG-COEF-RIGID).
+The time network runs once per time for all K patterns; particles differ only through their
+mixing weights.
 """
+
+import math
 
 import numpy as np
 import torch
@@ -17,7 +20,8 @@ def coefficients(params, t, z, cfg):
 
     params: motion parameter dict (uses "mix" and "time"); t: scalar time (number or 0-d
     tensor, any real value); z: (N, L) physics codes; cfg: MotionConfig -> w: (N, 12).
-    m(z) = softmax(z A + c) (N, K); P(t) = mlp(time, gamma(t)) reshaped (K, 12), evaluated once.
+    m(z) = softmax(z A + c) (N, K); P(t) = mlp(time, gamma(t)) reshaped (K, 12), evaluated once
+    (the rigid bodies of VG-COEF-RIGID when cfg.pattern_form is "rigid").
     """
     check_time("t", t)
     check_array("z", z, (None, params["mix"][0][0].shape[0]))
@@ -51,6 +55,8 @@ def motion_patterns(params, t, cfg):
 
 def motion_patterns_at(params, times, cfg):
     """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them."""
+    if cfg.pattern_form == "rigid":
+        return rigid_velocity_patterns(params["time"], times[:, None, None], cfg.max_time)
     out = mlp(params["time"], positional_encoding(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
     return out.reshape(times.shape[0], -1, 12)
 
@@ -62,3 +68,45 @@ def masked(w, mask):
         return w
     mask = torch.as_tensor(np.asarray(mask, dtype=bool), device=w.device)
     return w * mask.to(w.dtype)
+
+
+def rigid_velocity_patterns(B, t, max_time):
+    """P(t) of rigid bodies (VG-COEF-RIGID): B (K, 3 + 3 n) rows (omega, c at the n = 2 or 3
+    knots evenly spaced over [0, max_time]); t: a tensor that broadcasts against (K, 3), e.g.
+    (S, 1, 1) -> (..., K, 12).
+
+    Pattern k is v = omega x (x - c(t)) + c'(t), c(t) the polynomial through its knots:
+    translation columns c'(t) - omega x c(t), rotation columns omega, the rest zero.
+    """
+    return rigid_velocity_patterns_jet(B, t, max_time)[0]
+
+
+def rigid_velocity_patterns_jet(B, t, max_time):
+    """(P, dP/dt) of `rigid_velocity_patterns`, both (..., K, 12): dP/dt has translation
+    columns c''(t) - omega x c'(t) and zero elsewhere (the spin is constant)."""
+    omega, *knots = B.split(3, dim=-1)  # [K, 3] each
+    c = c_dot = c_ddot = 0.0
+    for knot, (l, dl, ddl) in zip(knots, _lagrange(t, max_time, len(knots))):
+        c, c_dot, c_ddot = c + knot * l, c_dot + knot * dl, c_ddot + knot * ddl
+    omega = omega.expand_as(c)
+    translation = c_dot - torch.linalg.cross(omega, c)
+    rate = c_ddot - torch.linalg.cross(omega, c_dot.expand_as(c))
+    rest = translation.new_zeros(translation.shape[:-1] + (6,))
+    return (torch.cat([translation, omega, rest], dim=-1),
+            torch.cat([rate, torch.zeros_like(omega), rest], dim=-1))
+
+
+def _lagrange(t, max_time, n):
+    """[(l_i(t), l_i'(t), l_i''(t))] of the Lagrange basis of the n (2 or 3) knots evenly spaced
+    over [0, max_time]; t a tensor, derivatives that do not depend on t as floats."""
+    nodes = [max_time * i / (n - 1) for i in range(n)]
+    out = []
+    for i, node in enumerate(nodes):
+        others = nodes[:i] + nodes[i + 1:]
+        d = math.prod(node - o for o in others)
+        if n == 2:
+            out.append(((t - others[0]) / d, 1.0 / d, 0.0))
+        else:
+            a, b = others
+            out.append(((t - a) * (t - b) / d, (2 * t - a - b) / d, 2.0 / d))
+    return out

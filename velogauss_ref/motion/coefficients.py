@@ -1,6 +1,6 @@
 """Basis coefficients w(t, z) = m(z) P(t) from K motion patterns.
 
-spec/motion.md, VG-COEF.
+spec/motion.md, VG-COEF and VG-COEF-RIGID.
 """
 
 import autograd.numpy as np
@@ -47,8 +47,48 @@ def motion_patterns(params, t, cfg):
     gamma with cfg.n_freqs_t frequencies (0: raw t, which does not repeat periodically
     into the future); K = cfg.n_patterns.
     """
+    if cfg.pattern_form == "rigid":
+        return rigid_velocity_patterns(params["time"], t, cfg.max_time)
     gamma_t = positional_encoding(np.reshape(t, (1,)), cfg.n_freqs_t)
     return np.reshape(mlp(params["time"], gamma_t), (cfg.n_patterns, N_BASIS))
+
+
+def rigid_velocity_patterns(B, t, max_time):
+    """P(t) (K, 12) of K rigid bodies (VG-COEF-RIGID).
+
+    B: (K, 3 + 3 n), each row (omega, c(tau_1), ..., c(tau_n)): a constant spin and the
+    body's centre at n = 2 or 3 knots tau evenly spaced over [0, max_time]; scalar t. The
+    centre c(t) is the polynomial through the knots (Lagrange form: a line for 2 knots, a
+    parabola for 3), and the body's velocity field v = omega x (x - c(t)) + c'(t) has the
+    coefficients [c'(t) - omega x c(t) | omega | 0 (stretch) | 0 (shear)].
+    """
+    check_array("B", B, (None, None))
+    check_scalar("t", t)
+    check_scalar("max_time", max_time)
+    n = (np.shape(B)[1] - 3) // 3
+    if np.shape(B)[1] != 3 + 3 * n or n not in (2, 3):
+        raise ValueError(f"B: expected 9 or 12 columns (a spin and 2 or 3 knots), got {np.shape(B)[1]}")
+    omega = B[:, 0:3]
+    nodes = [max_time * i / (n - 1) for i in range(n)]
+    c, c_dot = 0.0, 0.0
+    for i, node in enumerate(nodes):
+        knot = B[:, 3 + 3 * i:6 + 3 * i]
+        others = nodes[:i] + nodes[i + 1:]
+        scale = onp.prod([node - o for o in others])
+        # l_i(t) = prod_j (t - tau_j) / scale; its derivative sums the products leaving one out.
+        c = c + knot * (_product([t - o for o in others]) / scale)
+        c_dot = c_dot + knot * (sum(_product([t - o for k, o in enumerate(others) if k != j])
+                                    for j in range(len(others))) / scale)
+    translation = c_dot - np.cross(omega, c)
+    return np.concatenate([translation, omega, np.zeros((np.shape(B)[0], 6))], axis=1)
+
+
+def _product(factors):
+    """The product of a list of scalars (1.0 for an empty list)."""
+    out = 1.0
+    for f in factors:
+        out = out * f
+    return out
 
 
 def masked(w, mask):

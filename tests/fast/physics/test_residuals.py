@@ -19,11 +19,14 @@ def ref_both(params, x, t, cfg):
 
 
 cases = dict(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.4, -1.5, 7.0]), masked=st.booleans(),
-             n=st.sampled_from([0, 1, 3]), n_freqs_t=st.integers(0, 2))
+             n=st.sampled_from([0, 1, 3]), n_freqs_t=st.integers(0, 2), pattern_form=st.sampled_from(["mlp", "rigid"]))
 
 
-def _args(seed, t, masked, n, n_freqs_t):
-    cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t)
+def _args(seed, t, masked, n, n_freqs_t, pattern_form):
+    # pattern_form "rigid" (VG-COEF-RIGID): the fast path's closed-form dP/dt against the
+    # reference's autograd.
+    cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t, pattern_form=pattern_form,
+                    max_time=0.6, rigid_knots=2 + seed % 2)
     x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
     return (random_params(seed, cfg), x, t, cfg)
 
@@ -32,8 +35,8 @@ def _args(seed, t, masked, n, n_freqs_t):
 @pytest.mark.spec("VG-TRANSPORT")
 @settings(DEVICE_SETTINGS, max_examples=10)
 @given(**cases)
-def test_transport_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
-    args = _args(seed, t, masked, n, n_freqs_t)
+def test_transport_reference_vs_fast(device, seed, t, masked, n, n_freqs_t, pattern_form):
+    args = _args(seed, t, masked, n, n_freqs_t, pattern_form)
     # Gradients w.r.t. params, x and t: the physics loss backpropagates through the JVPs.
     check_agreement(ref.transport_residual, transport_residual, args, diff=(0, 1, 2), device=device, seed=seed)
     check_float32(ref.transport_residual, transport_residual, args, device)
@@ -42,8 +45,8 @@ def test_transport_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
 @pytest.mark.spec("VG-DIV")
 @settings(DEVICE_SETTINGS, max_examples=10)
 @given(**cases)
-def test_divergence_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
-    args = _args(seed, t, masked, n, n_freqs_t)
+def test_divergence_reference_vs_fast(device, seed, t, masked, n, n_freqs_t, pattern_form):
+    args = _args(seed, t, masked, n, n_freqs_t, pattern_form)
     check_agreement(ref.divergence, divergence, args, diff=(0, 1, 2), device=device, seed=seed)
     check_float32(ref.divergence, divergence, args, device)
 
@@ -51,8 +54,8 @@ def test_divergence_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
 @pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
 @settings(DEVICE_SETTINGS, max_examples=6)
 @given(**cases)
-def test_shared_jet_reference_vs_fast(device, seed, t, masked, n, n_freqs_t):
-    args = _args(seed, t, masked, n, n_freqs_t)
+def test_shared_jet_reference_vs_fast(device, seed, t, masked, n, n_freqs_t, pattern_form):
+    args = _args(seed, t, masked, n, n_freqs_t, pattern_form)
     check_agreement(ref_both, physics_residuals, args, diff=(0, 1, 2), device=device, seed=seed)
 
 

@@ -9,7 +9,8 @@ from hypothesis.extra import numpy as hnp
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import FD_STEP, RIGID_MASK, TRANSLATION_MASK, flat_params, random_params, small_cfg
 from velogauss_ref.motion import coefficients as coef_module
-from velogauss_ref.motion.coefficients import coefficients, mixing_weights
+from velogauss.scenes.motions import RigidMotion
+from velogauss_ref.motion.coefficients import coefficients, mixing_weights, rigid_velocity_patterns
 from velogauss_ref.nn import mlp, positional_encoding
 
 seeds = st.integers(0, 2**32 - 1)
@@ -88,15 +89,50 @@ def test_mask_zeroes_exactly_the_unselected_columns(mask):
     assert np.all(w[:, ~mask] != 0.0)  # the mask, not the parameters, zeroes them
 
 
-@pytest.mark.spec("VG-COEF")
+@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID")
 @pytest.mark.parametrize("masked", [False, True])
 @given(seed=seeds, t=st.floats(-3, 3), z=hnp.arrays(np.float64, (3, 3), elements=st.floats(-2, 2)),
-       n_freqs_t=st.integers(0, 2))
-def test_coefficients_gradient(masked, seed, t, z, n_freqs_t):
-    cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t)
+       n_freqs_t=st.integers(0, 2), pattern_form=st.sampled_from(["mlp", "rigid"]))
+def test_coefficients_gradient(masked, seed, t, z, n_freqs_t, pattern_form):
+    cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t, pattern_form=pattern_form,
+                    max_time=0.75)
     theta, unflatten = flat_params(random_params(seed, cfg))
     check_grads_fd(lambda theta, t, z: coefficients(unflatten(theta), t, z, cfg), (theta, t, z), (0, 1, 2),
                    np.random.default_rng(seed), step=FD_STEP)
+
+
+@pytest.mark.spec("VG-COEF-RIGID")
+@pytest.mark.parametrize("max_time", [0.75, 0.4, 1.0])
+@pytest.mark.parametrize("gravity, n", [((0.0, 0.0, -8.0), 3), ((0.0, 0.0, 0.0), 2)])
+def test_rigid_patterns_are_the_thrown_body_at_every_time(max_time, gravity, n):
+    # velogauss.scenes' analytic motion: a constant spin about a centre thrown under gravity
+    # (3 knots) or drifting (2). B = the spin and the centre's positions at the knots gives
+    # the body's basis coefficients (its own inversion of the affine motion) inside the
+    # window and past it, where the polynomial through the knots continues as the body does.
+    body = RigidMotion(centre=(0.3, -0.2, 0.1), omega=(1.8, 0.7, 0.4), velocity=(1.0, 0.5, 2.0), gravity=gravity)
+    centre = body.centre[None]
+    knots = [body.position(centre, t)[0] for t in np.linspace(0.0, max_time, n)]
+    B = np.tile(np.concatenate([body.omega, *knots]), (3, 1))
+    for t in (0.0, 0.2, max_time, 1.0, 2.5):
+        P = rigid_velocity_patterns(B, t, max_time)
+        np.testing.assert_allclose(P, np.broadcast_to(body.basis_coefficients(t), P.shape), rtol=0, atol=1e-12)
+
+
+@pytest.mark.spec("VG-COEF-RIGID")
+@given(seed=seeds, t=st.floats(-2, 3), n=st.sampled_from([2, 3]))
+def test_rigid_patterns_are_rigid_fields_with_a_constant_spin(seed, t, n):
+    # No stretch or shear at any time, and the rotation columns are the spin at every t.
+    B = np.random.default_rng(seed).standard_normal((5, 3 + 3 * n))
+    P = rigid_velocity_patterns(B, t, 0.75)
+    assert np.all(P[:, 6:] == 0.0)
+    np.testing.assert_array_equal(P[:, 3:6], B[:, :3])
+    still = rigid_velocity_patterns(np.concatenate([np.zeros((5, 3)), B[:, 3:]], axis=1), t, 0.75)
+    # Without spin the translation is the centre's velocity: the derivative of the
+    # polynomial through the knots, here numpy's fit through them, differentiated.
+    nodes = np.linspace(0.0, 0.75, n)
+    fits = [np.polyfit(nodes, B[k, 3:].reshape(n, 3), n - 1) for k in range(5)]  # [n powers, 3]
+    rate = np.stack([np.polyval(np.polyder(f[:, j]), t) for f in fits for j in range(3)]).reshape(5, 3)
+    np.testing.assert_allclose(still[:, :3], rate, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize(
