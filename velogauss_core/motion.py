@@ -181,8 +181,8 @@ def init_motion_params(rng, cfg):
       "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10.
     Hidden layers use PyTorch's default Linear initialisation (uniform within
     +-1/sqrt(fan_in)). Three heads start at zero, so a fresh model is the still canonical
-    scene: the time network's last layer (no velocity; B = 0 under "rigid"), Q (no acceleration) and the ADF's
-    last layer (identity correction). Their gradients are not zero, so all of them learn.
+    scene: the time network's last layer (no velocity; B = 0 under "rigid"), Q (no
+    acceleration) and the ADF's last layer (identity correction). Their gradients are not zero, so all of them learn.
     The rigid form starts with a small random spin (RIGID_OMEGA_INIT): its acceleration is
     quadratic in the spin, whose gradient at exactly zero would be zero.
     """

@@ -47,7 +47,8 @@ def test_rigid_patterns_share_the_acceleration_rate(effects):
 
 
 def test_no_acceleration_group_without_acceleration_and_no_motion_groups_when_static():
-    assert [g["name"] for g in make_optimizer(_model(("translation",), patterns="mlp"), TRAIN, EXTENT).param_groups][-1] == "motion"
+    translating = _model(("translation",), patterns="mlp")
+    assert [g["name"] for g in make_optimizer(translating, TRAIN, EXTENT).param_groups][-1] == "motion"
     assert [g["name"] for g in make_optimizer(_model(("static",)), TRAIN, EXTENT).param_groups] == list(FIELDS)
 
 

@@ -7,8 +7,8 @@ quantities directly: the acceleration Q (VG-ACC) and the rigid motion patterns B
 (VG-COEF-RIGID: spins and centres). These get their own, larger rate: Adam moves a parameter
 by about its rate per step, Q's entries must reach |v|²/L (a spin of 4 rad per unit time has
 centripetal coefficients of 16) and B's are spins and world positions of order 1, where a
-network's weights stay O(1) and its width scales its output. Means and motion decay exponentially from their initial
-to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
+network's weights stay O(1) and its width scales its output. Means and motion decay
+exponentially from their initial to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
 camera extent, as in 3DGS. The motion rate runs its decay from the end of the warm-up.
 """
 

@@ -19,7 +19,8 @@ def ref_both(params, x, t, cfg):
 
 
 cases = dict(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.4, -1.5, 7.0]), masked=st.booleans(),
-             n=st.sampled_from([0, 1, 3]), n_freqs_t=st.integers(0, 2), pattern_form=st.sampled_from(["mlp", "rigid"]))
+             n=st.sampled_from([0, 1, 3]), n_freqs_t=st.integers(0, 2),
+             pattern_form=st.sampled_from(["mlp", "rigid"]))
 
 
 def _args(seed, t, masked, n, n_freqs_t, pattern_form):
