@@ -3,6 +3,8 @@
 spec/motion.md, VG-COEF and VG-COEF-RIGID.
 """
 
+import math
+
 import autograd.numpy as np
 import numpy as onp
 
@@ -74,21 +76,14 @@ def rigid_velocity_patterns(B, t, max_time):
     for i, node in enumerate(nodes):
         knot = B[:, 3 + 3 * i:6 + 3 * i]
         others = nodes[:i] + nodes[i + 1:]
-        scale = onp.prod([node - o for o in others])
-        # l_i(t) = prod_j (t - tau_j) / scale; its derivative sums the products leaving one out.
-        c = c + knot * (_product([t - o for o in others]) / scale)
-        c_dot = c_dot + knot * (sum(_product([t - o for k, o in enumerate(others) if k != j])
+        scale = math.prod(node - o for o in others)
+        # l_i(t) = prod_j (t - tau_j) / scale; its derivative sums the products leaving one out
+        # (math.prod multiplies autograd's traced t as it is).
+        c = c + knot * (math.prod(t - o for o in others) / scale)
+        c_dot = c_dot + knot * (sum(math.prod(t - o for k, o in enumerate(others) if k != j)
                                     for j in range(len(others))) / scale)
     translation = c_dot - np.cross(omega, c)
     return np.concatenate([translation, omega, np.zeros((np.shape(B)[0], 6))], axis=1)
-
-
-def _product(factors):
-    """The product of a list of scalars (1.0 for an empty list)."""
-    out = 1.0
-    for f in factors:
-        out = out * f
-    return out
 
 
 def masked(w, mask):
