@@ -78,22 +78,30 @@ def rigid_velocity_patterns(B, t, max_time):
     Pattern k is v = omega x (x - c(t)) + c'(t), c(t) the polynomial through its knots:
     translation columns c'(t) - omega x c(t), rotation columns omega, the rest zero.
     """
-    return rigid_velocity_patterns_jet(B, t, max_time)[0]
+    omega, c, c_dot, _ = _rigid_centre(B, t, max_time)
+    return _rigid_columns(c_dot - torch.linalg.cross(omega, c), omega)
 
 
 def rigid_velocity_patterns_jet(B, t, max_time):
     """(P, dP/dt) of `rigid_velocity_patterns`, both (..., K, 12): dP/dt has translation
     columns c''(t) - omega x c'(t) and zero elsewhere (the spin is constant)."""
+    omega, c, c_dot, c_ddot = _rigid_centre(B, t, max_time)
+    P = _rigid_columns(c_dot - torch.linalg.cross(omega, c), omega)
+    return P, _rigid_columns(c_ddot - torch.linalg.cross(omega, c_dot), torch.zeros_like(omega))
+
+
+def _rigid_centre(B, t, max_time):
+    """(omega, c(t), c'(t), c''(t)) of B's rows, each (..., K, 3), from its knots (VG-COEF-RIGID)."""
     omega, *knots = B.split(3, dim=-1)  # [K, 3] each
     c = c_dot = c_ddot = 0.0
     for knot, (l, dl, ddl) in zip(knots, _lagrange(t, max_time, len(knots))):
         c, c_dot, c_ddot = c + knot * l, c_dot + knot * dl, c_ddot + knot * ddl
-    omega = omega.expand_as(c)
-    translation = c_dot - torch.linalg.cross(omega, c)
-    rate = c_ddot - torch.linalg.cross(omega, c_dot.expand_as(c))
-    rest = translation.new_zeros(translation.shape[:-1] + (6,))
-    return (torch.cat([translation, omega, rest], dim=-1),
-            torch.cat([rate, torch.zeros_like(omega), rest], dim=-1))
+    return omega.expand_as(c), c, c_dot.expand_as(c), c_ddot
+
+
+def _rigid_columns(translation, rotation):
+    """[translation | rotation | 0 (stretch) | 0 (shear)] (..., 12) from two (..., 3) blocks."""
+    return torch.cat([translation, rotation, translation.new_zeros(translation.shape[:-1] + (6,))], dim=-1)
 
 
 def _lagrange(t, max_time, n):
