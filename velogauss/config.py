@@ -79,9 +79,11 @@ class _ModelChoices:
     acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
     # How the motion patterns depend on time (spec/motion.md): "mlp" the time network of
     # VG-COEF, "rigid" bodies spinning at a constant rate about a centre under a constant
-    # acceleration (VG-COEF-RIGID), or "auto": rigid when the effects are rigid (translation,
-    # rotation, gravity), else mlp. "auto" is the default: on toss, rigid took the future
-    # velocity error from 0.164 to 0.016 (benchmarks/FIDELITY.md, section 1).
+    # acceleration (VG-COEF-RIGID), "harmonic" oscillators of learned frequency with their
+    # own acceleration (VG-COEF-HARM, VG-ACC-HARM; `acceleration` is then not read), or
+    # "auto": harmonic when the effects include oscillation, else rigid when they are rigid
+    # (translation, rotation, gravity), else mlp. "auto" is the default: on toss, rigid took
+    # the future velocity error from 0.164 to 0.016 (benchmarks/FIDELITY.md, section 1).
     patterns: Union[Literal["auto"], PatternForm] = "auto"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3

@@ -75,6 +75,27 @@ ACC_POLY_DEGREE = 2
 # the initial centripetal term (|omega|^2 |x - c| ~ 0.01 on unit-size scenes) negligible
 # against what the residual learns.
 RIGID_OMEGA_INIT = 0.1
+# VG-COEF-HARM: the patterns' shared frequency at the start, in cycles over the observed
+# window [0, max_time], when the training video gives no estimate (velogauss.train.frequency:
+# no camera saw enough times, e.g. a monocular capture). One cycle is the middle of what a
+# window can identify; the frequency then converges only from about half a cycle away: the
+# loss of a sinusoid fitted to an oscillation is not convex in their frequency difference.
+# Started at half a cycle, pulse's frequency stopped at 6.7 rad against the true 9.4
+# (benchmarks/FIDELITY.md, section 8).
+HARMONIC_CYCLES_INIT = 1.0
+# The scan of the training video for that starting frequency (velogauss.train.frequency):
+# candidate frequencies from 1/4 cycle over the window (below that a sinusoid is a parabola)
+# to 3 cycles (at least 5 frames per period with the catalogue's 16 observed frames), in
+# steps of 1/40 cycle, well below the width of the scan's peak (about one cycle over the
+# window), and the frames one camera must have seen in the window for its pixels to count
+# (the fit has 3 unknowns per pixel: a mean, a cosine and a sine).
+FREQ_SCAN_CYCLES = (0.25, 3.0)
+FREQ_SCAN_STEP = 0.025
+FREQ_SCAN_MIN_FRAMES = 4
+# VG-ACC-HARM: harmonics of each pattern's frequency in its acceleration. The material
+# acceleration (dL/dt + L^2) x of an oscillating affine field L(t) = a + b cos + c sin holds
+# the frequencies 0, Omega (dL/dt) and 2 Omega (L^2), and nothing higher.
+ACC_HARMONICS = 2
 # A particle whose motion over the observed window stays below this many pixels, measured at
 # its depth in the training camera that sees it largest, is "static": it is frozen at its
 # canonical state and not integrated. A quarter pixel is below what the photometric loss

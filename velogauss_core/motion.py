@@ -15,7 +15,7 @@ from annotated_types import Interval
 from pydantic import Strict
 
 from velogauss_core.checks import check_scalar
-from velogauss_core.constants import ACC_POLY_DEGREE, RIGID_OMEGA_INIT
+from velogauss_core.constants import ACC_HARMONICS, ACC_POLY_DEGREE, HARMONIC_CYCLES_INIT, RIGID_OMEGA_INIT
 
 # Number of affine basis velocity fields, the columns of Phi (VG-BASIS).
 N_BASIS = 12
@@ -31,9 +31,15 @@ COLUMN_GROUPS = {
     "shear": (9, 10, 11),
 }
 
-Effect = Literal["translation", "rotation", "gravity", "stretch", "shear", "static"]
-# The effects a scene may declare (scene.json, --effects), in canonical order.
+Effect = Literal["translation", "rotation", "gravity", "stretch", "shear", "oscillation", "static"]
+# The effects a scene may declare (scene.json, --effects), in canonical order. "oscillation":
+# the motion repeats (a restoring force), which selects the harmonic time forms
+# (VG-COEF-HARM, VG-ACC-HARM) under `model.patterns = auto`.
 EFFECTS: tuple[str, ...] = get_args(Effect)
+# What a scene that declares nothing may use: every effect but "oscillation", which is not a
+# basis column but an assumption about time (the motion repeats past the window) that only
+# a declaration may make.
+UNDECLARED_EFFECTS: tuple[str, ...] = tuple(e for e in EFFECTS if e != "oscillation")
 # The effects that select velocity basis columns (COLUMN_GROUPS).
 MOTION_EFFECTS: tuple[str, ...] = tuple(COLUMN_GROUPS)
 
@@ -56,13 +62,16 @@ Scheme = Literal["integrate", "adf-step"]
 AccelerationForm = Literal["poly", "rigid"]
 # How the acceleration of each motion pattern depends on time (spec/physics.md): "poly" a
 # polynomial of degree ACC_POLY_DEGREE in t per basis column (VG-ACC), "rigid" a body spinning
-# at a constant rate whose centre falls under a constant acceleration (VG-ACC-RIGID).
-ACC_FORMS: tuple[str, ...] = get_args(AccelerationForm)
+# at a constant rate whose centre falls under a constant acceleration (VG-ACC-RIGID). These
+# are the config's choices; MotionConfig also takes "harmonic" (VG-ACC-HARM), which the
+# harmonic patterns bring with them, as it needs their frequencies.
+ACC_FORMS: tuple[str, ...] = (*get_args(AccelerationForm), "harmonic")
 
-PatternForm = Literal["mlp", "rigid"]
+PatternForm = Literal["mlp", "rigid", "harmonic"]
 # How the motion patterns P(t) depend on time (spec/motion.md): "mlp" the time network of
 # VG-COEF, "rigid" a body spinning at a constant rate about a centre that moves under a
-# constant acceleration (VG-COEF-RIGID).
+# constant acceleration (VG-COEF-RIGID), "harmonic" an oscillator of learned frequency
+# (VG-COEF-HARM).
 PATTERN_FORMS: tuple[str, ...] = get_args(PatternForm)
 
 VelocityKind = Literal["affine", "mlp"]
@@ -114,9 +123,10 @@ class MotionConfig(MotionSizes):
 
     mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
     acc_mask: None or 12 bools, the acceleration's columns (VG-ACC);
-    acc_form: the acceleration's time dependence, "poly" (VG-ACC) or "rigid" (VG-ACC-RIGID);
-    pattern_form: the motion patterns' time dependence, "mlp" (VG-COEF) or "rigid"
-      (VG-COEF-RIGID);
+    acc_form: the acceleration's time dependence, "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or
+      "harmonic" (VG-ACC-HARM, only with harmonic patterns, whose frequencies it uses);
+    pattern_form: the motion patterns' time dependence, "mlp" (VG-COEF), "rigid"
+      (VG-COEF-RIGID) or "harmonic" (VG-COEF-HARM);
     max_time: the end of the observed window in normalised time, in (0, 1], where
       VG-COEF-RIGID's last knot sits;
     rigid_knots: VG-COEF-RIGID's knots per centre, evenly spaced over [0, max_time]: 3 (a
@@ -124,7 +134,7 @@ class MotionConfig(MotionSizes):
     Masks are stored as tuples of bools so the config stays hashable and serialisable.
     Raises ValueError naming the field for a size outside its range (`MotionSizes`), a mask
     that is not 12 bools, an unknown `acc_form` or `pattern_form`, a max_time outside (0, 1]
-    or rigid_knots other than 2 or 3.
+    or rigid_knots other than 2 or 3, and a harmonic acceleration without harmonic patterns.
     """
 
     mask: tuple[bool, ...] | None = None
@@ -146,6 +156,9 @@ class MotionConfig(MotionSizes):
             raise ValueError(f"acc_form: expected one of {ACC_FORMS}, got {self.acc_form!r}")
         if self.pattern_form not in PATTERN_FORMS:
             raise ValueError(f"pattern_form: expected one of {PATTERN_FORMS}, got {self.pattern_form!r}")
+        if self.acc_form == "harmonic" and self.pattern_form != "harmonic":
+            raise ValueError(f"acc_form: 'harmonic' takes the harmonic patterns' frequencies, got pattern_form "
+                             f"{self.pattern_form!r}")
         if not 0.0 < check_scalar("max_time", self.max_time) <= 1.0:
             raise ValueError(f"max_time: expected a time in (0, 1], got {self.max_time!r}")
         if self.rigid_knots not in (2, 3) or isinstance(self.rigid_knots, bool):
@@ -174,17 +187,23 @@ def init_motion_params(rng, cfg):
       "mix":  [(A (code_dim, K), c (K,))], the pattern-mixing softmax of VG-COEF;
       "time": 1 (1 + 2 n_freqs_t) -> hidden^depth -> K * 12, the motion patterns P(t), or
               with cfg.pattern_form "rigid" the array B (K, 3 + 3 rigid_knots) of
-              VG-COEF-RIGID: each pattern's spin and its centre at the knots;
+              VG-COEF-RIGID: each pattern's spin and its centre at the knots, or with
+              "harmonic" [(C (3, K, 12), Omega (1,))] of VG-COEF-HARM: each pattern's mean,
+              cosine and sine coefficients and the frequency they share;
       "acc":  the acceleration of each pattern: Q (ACC_POLY_DEGREE + 1, K, 12), the polynomial
               of VG-ACC, or with cfg.acc_form "rigid" R (K, 12), each pattern's spin, linear
-              acceleration, centre and centre velocity at t = 0 (VG-ACC-RIGID);
+              acceleration, centre and centre velocity at t = 0 (VG-ACC-RIGID), or with
+              "harmonic" Q (2 ACC_HARMONICS + 1, K, 12), the coefficients of 1, cos(j Omega t)
+              and sin(j Omega t) at the patterns' frequency (VG-ACC-HARM);
       "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10.
     Hidden layers use PyTorch's default Linear initialisation (uniform within
     +-1/sqrt(fan_in)). Three heads start at zero, so a fresh model is the still canonical
     scene: the time network's last layer (no velocity; B = 0 under "rigid"), Q (no
     acceleration) and the ADF's last layer (identity correction). Their gradients are not zero, so all of them learn.
     The rigid form starts with a small random spin (RIGID_OMEGA_INIT): its acceleration is
-    quadratic in the spin, whose gradient at exactly zero would be zero.
+    quadratic in the spin, whose gradient at exactly zero would be zero. The harmonic form
+    starts at zero coefficients and HARMONIC_CYCLES_INIT cycles over the window (training then
+    sets the frequency the video shows, velogauss.train.frequency).
     """
     L, K = cfg.code_dim, cfg.n_patterns
     shapes = network_shapes(cfg)
@@ -196,7 +215,7 @@ def init_motion_params(rng, cfg):
     return {
         "code": mlp("code"),
         "mix": [(rng.standard_normal((L, K)) / np.sqrt(L), np.zeros(K))],
-        "time": mlp("time", zero_last=True) if cfg.pattern_form == "mlp" else np.zeros((K, 3 + 3 * cfg.rigid_knots)),
+        "time": _patterns_init(cfg, mlp),
         "acc": _acceleration_init(rng, cfg),
         "adf": mlp("adf", zero_last=True),
     }
@@ -213,12 +232,26 @@ def carry_start(t, offset, max_time):
     return float(min(max(t - offset, 0.0), max_time))
 
 
+def _patterns_init(cfg, mlp):
+    """The "time" entry of `init_motion_params`: the time network with a zero last layer
+    (VG-COEF), B = 0 (VG-COEF-RIGID), or still oscillators at HARMONIC_CYCLES_INIT cycles over
+    the window (VG-COEF-HARM)."""
+    K = cfg.n_patterns
+    if cfg.pattern_form == "mlp":
+        return mlp("time", zero_last=True)
+    if cfg.pattern_form == "rigid":
+        return np.zeros((K, 3 + 3 * cfg.rigid_knots))
+    return [(np.zeros((3, K, N_BASIS)), np.array([2.0 * np.pi * HARMONIC_CYCLES_INIT / cfg.max_time]))]
+
+
 def _acceleration_init(rng, cfg):
-    """The "acc" entry of `init_motion_params`: Q = 0 (VG-ACC), or a small random spin about
-    the origin with no linear acceleration (VG-ACC-RIGID)."""
+    """The "acc" entry of `init_motion_params`: Q = 0 (VG-ACC, VG-ACC-HARM), or a small random
+    spin about the origin with no linear acceleration (VG-ACC-RIGID)."""
     K = cfg.n_patterns
     if cfg.acc_form == "poly":
         return np.zeros((ACC_POLY_DEGREE + 1, K, N_BASIS))
+    if cfg.acc_form == "harmonic":
+        return np.zeros((2 * ACC_HARMONICS + 1, K, N_BASIS))
     rigid = np.zeros((K, N_BASIS))
     rigid[:, :3] = RIGID_OMEGA_INIT * rng.standard_normal((K, 3))
     return rigid

@@ -65,6 +65,37 @@ def test_extrapolation_beats_holding_still(spin_run):
     assert traj["future"]["mean_distance"] < 0.12 * traj["future"]["static_mean_distance"]
 
 
+# The periodic scene needs more: at 32 px and 450 iterations its oscillation was not learned
+# (velocity error 0.62-0.64), at 64 px and 1200 iterations it is (~90 s on one CI core).
+PERIODIC = ["train.iterations=1200", "train.warmup=100", "train.curriculum=500", "train.eval_every=0",
+            "train.checkpoint_every=0", "densify.start=100", "densify.every=50", "densify.until=900",
+            "densify.opacity_reset_every=100000", "densify.static_every=100", "physics.n_points=256",
+            "physics.ramp=500", "train.adf_start=600"]
+
+
+@pytest.fixture(scope="module")
+def pulse_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("e2e_pulse")
+    make_scene("pulse", root / "pulse", resolution=64, n_views=6, n_times=11, n_points=500, n_heldout=1)
+    scene = load_scene(root / "pulse")
+    model = loop.train(load_config(None, PERIODIC), scene, root / "run", progress=False)
+    return scene, load_ground_truth(scene.root), model
+
+
+def test_the_periodic_scene_is_learned_and_extrapolated(pulse_run):
+    # pulse declares `oscillation`, so its patterns are oscillators (VG-COEF-HARM). Seeds 0-2
+    # of this set-up: velocity error 0.17-0.21 observed and 0.19-0.23 future, extrapolation
+    # 4.8-6.8 dB above holding still (the issue's target for the periodic scene is 3 dB).
+    # With the time network (model.patterns = mlp, seed 0) the error was 1.01 / 0.99, no
+    # motion at all, and extrapolation 0.2 dB below holding still.
+    scene, truth, model = pulse_run
+    err = velocity_error(model, truth, scene.max_time)
+    assert err["observed"]["relative_l2"] < 0.30
+    assert err["future"]["relative_l2"] < 0.33
+    result = evaluate_model(model, scene, splits=("extrapolation",), ground_truth=truth)
+    assert result["splits"]["extrapolation"]["mean"]["psnr"] > result["freeze_baseline"]["mean"]["psnr"] + 3.0
+
+
 def test_cli_train_eval_render_export(tmp_path):
     """The user's path through the CLI: default scene generated, trained, scored, drawn, exported."""
     runner = CliRunner()

@@ -46,6 +46,17 @@ def test_rigid_patterns_share_the_acceleration_rate(effects):
     assert all(p is not q for p in groups["motion"] for q in groups["acc"])
 
 
+def test_harmonic_coefficients_take_the_acceleration_rate_and_the_frequency_the_networks():
+    # VG-COEF-HARM: C holds velocity coefficients themselves; the shared frequency, started
+    # where the video oscillates, is only refined, at the networks' rate.
+    model = _model(("stretch", "oscillation"), patterns="auto")
+    groups = {g["name"]: g["params"] for g in make_optimizer(model, TRAIN, EXTENT).param_groups}
+    C, omega = model.motion.time
+    assert groups["acc"] == [model.motion.acc, C]
+    assert any(p is omega for p in groups["motion"])
+    assert len([p for g in groups.values() for p in g]) == len(list(model.parameters()))
+
+
 def test_no_acceleration_group_without_acceleration_and_no_motion_groups_when_static():
     translating = _model(("translation",), patterns="mlp")
     assert [g["name"] for g in make_optimizer(translating, TRAIN, EXTENT).param_groups][-1] == "motion"

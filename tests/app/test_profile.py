@@ -61,6 +61,18 @@ def test_pattern_form_auto_is_rigid_exactly_for_rigid_motion(effects, auto):
     assert resolve_profile(effects, True, patterns="auto").rigid_knots == (3 if "gravity" in effects else 2)
 
 
+@pytest.mark.parametrize("effects", [("stretch", "oscillation"), ("rotation", "oscillation")])
+def test_oscillation_brings_harmonic_patterns_and_their_acceleration(effects):
+    # "auto": a declared oscillation takes VG-COEF-HARM before the rigid form, and its
+    # acceleration is VG-ACC-HARM whatever model.acceleration says (it needs the frequencies).
+    for acceleration in ("poly", "auto"):
+        p = resolve_profile(effects, True, acceleration=acceleration, patterns="auto")
+        assert (p.pattern_form, p.acc_form, p.acceleration) == ("harmonic", "harmonic", True)
+    assert resolve_profile(effects, True, patterns="mlp").pattern_form == "mlp"
+    # Oscillation alone moves nothing: it is a statement about time, not a basis column.
+    assert not resolve_profile(("oscillation",), True, patterns="auto").moving
+
+
 @pytest.mark.parametrize("effects", [("stretch",), ("rotation", "shear")])
 def test_rigid_patterns_refuse_a_deforming_scene(effects):
     with pytest.raises(ValueError, match=r"^model\.patterns: 'rigid' cannot follow"):
@@ -96,6 +108,8 @@ def test_auto_reads_the_scene_then_falls_back_to_everything():
     assert p.effects == ("rotation",) and not p.divergence
     q = resolve_profile("auto", "auto", None)
     assert q.n_columns == 12 and q.divergence and q.acceleration
+    # ... every effect but oscillation, an assumption about time only a declaration makes.
+    assert "oscillation" not in q.effects and "static" in q.effects
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

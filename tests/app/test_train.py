@@ -291,7 +291,8 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
                                    ["model.scheme=adf-step", "train.lambda_carry=1.0", "train.carry_points=16"],
                                    ["physics.placement=box"], ["model.acceleration=rigid"],
                                    ["model.acceleration=auto", "model.ablation=no-pds"], ["train.motion_only=true"],
-                                   ["model.patterns=mlp"], ["model.patterns=rigid", "model.scheme=adf-step"]])
+                                   ["model.patterns=mlp"], ["model.patterns=rigid", "model.scheme=adf-step"],
+                                   ["model.patterns=harmonic"], ["model.patterns=harmonic", "model.scheme=adf-step"]])
 def test_schemes_and_options_train_and_reload(tiny_scene, tmp_path, extra):
     cfg = load_config(None, TINY + extra)
     _trains_and_reloads(cfg, tiny_scene, tmp_path)

@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from velogauss_core.motion import MotionConfig, MotionSizes
+from velogauss_core.motion import MotionConfig, MotionSizes, init_motion_params
 
 
 def test_sizes_come_first_then_masks():
@@ -27,6 +27,7 @@ def test_sizes_come_first_then_masks():
     ({"max_time": 0.0}, r"max_time: expected a time in \(0, 1\], got 0.0"),
     ({"max_time": float("nan")}, r"max_time: expected a finite real scalar"),
     ({"rigid_knots": 4}, r"rigid_knots: expected 2 or 3, got 4"),
+    ({"acc_form": "harmonic"}, r"acc_form: 'harmonic' takes the harmonic patterns' frequencies, got pattern_form 'mlp'"),
 ])
 def test_bad_values_are_named(sizes, message):
     with pytest.raises(ValueError, match=message):
@@ -44,3 +45,13 @@ def test_frozen_and_hashable():
     assert hash(cfg) == hash(MotionConfig(mask=(True,) * 12))
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.hidden = 8
+
+
+def test_harmonic_patterns_start_still_at_one_cycle():
+    # VG-COEF-HARM: zero coefficients (a still scene) and one shared frequency, one cycle over
+    # the window (training then sets the video's); the acceleration's harmonics start at zero.
+    cfg = MotionConfig(n_patterns=4, pattern_form="harmonic", acc_form="harmonic", max_time=0.5)
+    params = init_motion_params(np.random.default_rng(0), cfg)
+    [(C, omega)], Q = params["time"], params["acc"]
+    assert C.shape == (3, 4, 12) and np.all(C == 0) and Q.shape == (5, 4, 12) and np.all(Q == 0)
+    np.testing.assert_allclose(omega, [2 * np.pi / 0.5], rtol=1e-12)

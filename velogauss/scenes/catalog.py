@@ -3,7 +3,8 @@
 World axes: z up, gravity along −z; objects of about one unit near the origin, seen from
 about 4 units away. Each scene declares the physical `effects` its motion needs, named
 after the VG-BASIS column groups (`translation`, `rotation`, `stretch`, `shear`) plus
-`gravity` (a non-zero acceleration) and `static` (a body that never moves):
+`gravity` (a non-zero acceleration), `oscillation` (the motion repeats) and `static` (a body
+that never moves):
 
 - `spin`: a checkered box spinning about a tilted axis through the origin. rotation.
 - `toss`: a spinning checkered box thrown up and falling back under gravity; it leaves
@@ -20,7 +21,7 @@ after the VG-BASIS column groups (`translation`, `rotation`, `stretch`, `shear`)
 - `pulse`: a cube whose stretch along x oscillates, `exp(sin(ω t) diag(k, −k/2, −k/2))`
   with a period of 2/3: the motion reverses inside the observed window and again in the
   future (it is back at its canonical shape at t = 1), which no motion extrapolated as a
-  polynomial in t can follow. stretch, incompressible.
+  polynomial in t can follow. stretch, oscillation, incompressible.
 - `grow`: a sphere expanding uniformly as `e^{kt}`: the one compressible scene, so that
   `incompressible = false` is exercised. stretch.
 
@@ -133,7 +134,7 @@ def pulse():
                 texture=Texture("checker", (_RED, _WHITE), frequency=2.0),
                 motion=PeriodicFlowMotion(centre=(0.0, 0.0, 0.0), generator=np.diag([k, -k / 2, -k / 2]),
                                           omega=3.0 * np.pi))
-    return AnalyticScene("pulse", [cube], effects=["stretch"], incompressible=True)
+    return AnalyticScene("pulse", [cube], effects=["stretch", "oscillation"], incompressible=True)
 
 
 SCENES = {"spin": spin, "toss": toss, "multi": multi, "stretch": stretch, "shear": shear, "grow": grow,

@@ -37,6 +37,7 @@ from velogauss.model.motion import carry_loss, motion_residuals
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
+from velogauss.train.frequency import start_frequency
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train.sampling import FrameSampler, camera_extent, collocation_near, collocation_points
 from velogauss.train.static import detect_moving, pixel_footprint
@@ -113,6 +114,7 @@ def prepare(cfg, data, run_dir, resume=False):
         profile = scene_profile(cfg, data.metadata)
         points, colors = _initial_points(data, cfg.model.init_points, rng)
         model = build_model(cfg, profile, points, colors, rng).to(device)
+        start_frequency(model, data.train, data.max_time)
         start, extra = 0, {"elapsed_s": 0.0, "after_reset": False, "psnr_ema": None}
         run_dir.mkdir(parents=True, exist_ok=True)
         write_text(run_dir / "config.toml", to_toml(cfg))

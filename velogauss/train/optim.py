@@ -3,9 +3,10 @@ surgery that densification needs.
 
 Groups: one per Gaussian field (means, log_scales, quats, opacity_logits, sh_dc, sh_rest),
 one for the motion networks and one, named "acc", for the arrays that hold physical
-quantities directly: the acceleration Q (VG-ACC) and the rigid motion patterns B
-(VG-COEF-RIGID: spins and centres). These get their own, larger rate: Adam moves a parameter
-by about its rate per step, Q's entries must reach |v|²/L (a spin of 4 rad per unit time has
+quantities directly: the acceleration Q (VG-ACC), the rigid motion patterns B (VG-COEF-RIGID:
+spins and centres) and the oscillators' coefficients C (VG-COEF-HARM; their shared frequency
+stays with the networks). These get their own, larger rate: Adam moves a parameter by about
+its rate per step, Q's entries must reach |v|²/L (a spin of 4 rad per unit time has
 centripetal coefficients of 16) and B's are spins and world positions of order 1, where a
 network's weights stay O(1) and its width scales its output. Means and motion decay
 exponentially from their initial to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
@@ -32,6 +33,12 @@ def make_optimizer(model, train_cfg, extent):
         acc = [model.motion.acc] if model.spec.acceleration else []
         if model.spec.velocity == "affine" and model.spec.config.pattern_form == "rigid":
             acc.append(model.motion.time)
+        if model.spec.velocity == "affine" and model.spec.config.pattern_form == "harmonic":
+            # C, not the frequency (VG-COEF-HARM): Adam moves a parameter by about its rate
+            # per step whatever its gradient, and the shared frequency, started where the
+            # video oscillates, is barely determined while the curriculum's window is shorter
+            # than a period; at the larger rate it drifted from 9.42 to 9.0 on pulse.
+            acc.append(model.motion.time[0])
         networks = [p for p in model.motion.parameters() if all(p is not a for a in acc)]
         groups.append({"params": networks, "lr": t.lr_motion, "name": "motion"})
         if acc:

@@ -1,11 +1,12 @@
 """Walkthrough part: the affine velocity model, from basis to Eulerian field
-(VG-BASIS, VG-CODE, VG-COEF, VG-VEL, VG-FIELD)."""
+(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-RIGID, VG-COEF-HARM, VG-VEL, VG-FIELD)."""
 
 import numpy as np
 
 from velogauss_ref.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_ref.motion.code import physics_code
-from velogauss_ref.motion.coefficients import coefficients, mixing_weights, motion_patterns, rigid_velocity_patterns
+from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
+                                              motion_patterns, rigid_velocity_patterns)
 from velogauss_ref.motion.velocity import mlp_velocity, velocity, velocity_field
 from velogauss.walkthrough.figures import COLUMN_COLOURS, COLUMN_LABELS, new_figure, save
 from velogauss.walkthrough.printing import Section, session
@@ -122,6 +123,37 @@ def rigid_coefficients_section(figures):
     )
 
 
+# The catalogue's `pulse`: a cube stretched along x as exp(sin(w t) diag(k, -k/2, -k/2)).
+PULSE_OMEGA, PULSE_K = 3.0 * np.pi, np.log(1.6)
+
+
+def harmonic_coefficients_section(figures):
+    """VG-COEF-HARM: the pulsing cube as oscillating patterns, inside the window and past it."""
+    stretch = PULSE_K * np.array([1.0, -0.5, -0.5])
+    C = np.zeros((3, 1, 12))
+    C[1, 0, 6:9] = PULSE_OMEGA * stretch  # b: the stretch rate at t = 0
+    omega = np.array([PULSE_OMEGA])
+    x = np.array([[0.2, 0.1, -0.1]])
+    steps = []
+    for t in (0.3, 0.9):
+        steps += [f"v = velocity(x, harmonic_velocity_patterns(C, omega, t={t}))",
+                  {"v": velocity(x, harmonic_velocity_patterns(C, omega, t)),
+                   "ω cos(ω t) L x": PULSE_OMEGA * np.cos(PULSE_OMEGA * t) * stretch * x}]
+    return Section(
+        "For a scene that declares `oscillation`, `model.patterns = auto` replaces the time network by "
+        "oscillators: each pattern is `a + b cos(Ω t) + c sin(Ω t)`, and all share one learned "
+        "frequency Ω. A time network of raw t cannot reverse more than about once inside the window "
+        "and continues by its tail past it; an oscillator keeps reversing. The example is the "
+        "catalogue's `pulse`, a cube stretched along x by `exp(sin(ω t) L)` with ω = 3π and "
+        "`L = ln 1.6 · diag(1, −½, −½)`: its velocity `ω cos(ω t) L x` is one pattern with b = ωL "
+        "on the stretch columns, read inside the window (t = 0.3, after its first reversal) and past "
+        "it (t = 0.9, after its third).",
+        [session({"C[1]": C[1], "omega": omega, "x": x},
+                 "P = harmonic_velocity_patterns(C, omega, t)  # a + b cos(Ω t) + c sin(Ω t)",
+                 {"P(0)": harmonic_velocity_patterns(C, omega, 0.0)}, *steps)],
+    )
+
+
 def _coefficients_figure(figures, params, z):
     times = np.linspace(0, 1, 41)
     patterns = np.stack([motion_patterns(params, t, CFG) for t in times])  # (T, K, 12)
@@ -225,5 +257,5 @@ def mlp_velocity_section(figures):
 
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
-            "VG-COEF-RIGID": rigid_coefficients_section,
+            "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
             "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-VEL-MLP": mlp_velocity_section}

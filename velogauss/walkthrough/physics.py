@@ -1,4 +1,4 @@
-"""Walkthrough part: acceleration and the two physics residuals (VG-ACC, VG-ACC-RIGID,
+"""Walkthrough part: acceleration and the two physics residuals (VG-ACC, VG-ACC-RIGID, VG-ACC-HARM,
 VG-TRANSPORT, VG-DIV) on a rigid field, a stretching field and a non-physical (random network) field."""
 
 import dataclasses
@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 
-from velogauss_ref.physics.acceleration import acceleration_field, rigid_patterns
+from velogauss_ref.physics.acceleration import acceleration_field, harmonic_patterns, rigid_patterns
 from velogauss_ref.motion.velocity import mlp_velocity
 from velogauss_ref.physics.residuals import divergence, mlp_residuals, transport_residual
 from velogauss.walkthrough.figures import new_figure, save
@@ -82,6 +82,31 @@ def rigid_acceleration_section(figures):
                  {"alpha": rigid_patterns(B, T)}),
          session({"x": POINTS, "t": T}, "a = acceleration_field(params, x, t, cfg)  # cfg.acc_form = 'rigid'",
                  {"a": acceleration_field(params, POINTS, T, cfg), "g + ω × (ω × (x − c(t)))": by_hand})],
+    )
+
+
+def harmonic_acceleration_section(figures):
+    """VG-ACC-HARM: the pulsing cube's acceleration from harmonics 0, 1 and 2 of its frequency."""
+    w, L = 3.0 * np.pi, np.log(1.6) * np.array([1.0, -0.5, -0.5])
+    Q = np.zeros((5, 1, 12))
+    Q[0, 0, 6:9] = Q[3, 0, 6:9] = 0.5 * w * w * L * L  # (1 + cos 2θ) / 2 · ω² L²
+    Q[2, 0, 6:9] = -w * w * L  # −sin θ · ω² L
+    by_hand = w * w * (np.cos(w * T) ** 2 * L * L - np.sin(w * T) * L) * POINTS
+    cfg = dataclasses.replace(CFG, pattern_form="harmonic", acc_form="harmonic")
+    params = {**constant_motion_params(coefficient_vector()), "acc": np.tile(Q, (1, CFG.n_patterns, 1)),
+              "time": [(np.zeros((3, CFG.n_patterns, 12)), np.array([w]))]}
+    return Section(
+        "Oscillating patterns bring their own acceleration: harmonics 0, 1 and 2 of the patterns' "
+        "frequency, `Q₀ + Σⱼ Q₂ⱼ₋₁ cos(jΩt) + Q₂ⱼ sin(jΩt)`. For `v = L(t) x` the material "
+        "acceleration is `(L̇ + L²) x`, whose frequencies are exactly 0, Ω and 2Ω, so the transport "
+        "residual asks the velocity to keep oscillating past the window instead of bending it "
+        "towards a quadratic in t. The example is the pulsing cube of VG-COEF-HARM, whose "
+        "acceleration is `ω² (cos²(ωt) L² − sin(ωt) L) x`.",
+        [session({"Q[:, 0, 6:9]": Q[:, 0, 6:9], "omega": np.array([w]), "t": T},
+                 "alpha = harmonic_patterns(Q, omega, t)  # stretch columns 6:9",
+                 {"alpha[:, 6:9]": harmonic_patterns(Q, np.array([w]), T)[:, 6:9]}),
+         session({"x": POINTS, "t": T}, "a = acceleration_field(params, x, t, cfg)  # cfg.acc_form = 'harmonic'",
+                 {"a": acceleration_field(params, POINTS, T, cfg), "ω² (cos²(ωt) L² − sin(ωt) L) x": by_hand})],
     )
 
 
@@ -174,5 +199,6 @@ def mlp_residuals_section(figures):
 
 
 SECTIONS = {"VG-ACC": acceleration_section, "VG-ACC-RIGID": rigid_acceleration_section,
+            "VG-ACC-HARM": harmonic_acceleration_section,
             "VG-TRANSPORT": transport_section, "VG-DIV": divergence_section,
             "VG-TRANSPORT-MLP": mlp_residuals_section}

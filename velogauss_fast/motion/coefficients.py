@@ -1,6 +1,7 @@
 """Basis coefficients w(t, z) from K motion patterns, in torch.
 
-Twin of `velogauss_ref.motion.coefficients` (spec/motion.md, VG-COEF and VG-COEF-RIGID).
+Twin of `velogauss_ref.motion.coefficients` (spec/motion.md, VG-COEF, VG-COEF-RIGID and
+VG-COEF-HARM).
 The time network runs once per time for all K patterns; particles differ only through their
 mixing weights.
 """
@@ -21,7 +22,8 @@ def coefficients(params, t, z, cfg):
     params: motion parameter dict (uses "mix" and "time"); t: scalar time (number or 0-d
     tensor, any real value); z: (N, L) physics codes; cfg: MotionConfig -> w: (N, 12).
     m(z) = softmax(z A + c) (N, K); P(t) = mlp(time, gamma(t)) reshaped (K, 12), evaluated once
-    (the rigid bodies of VG-COEF-RIGID when cfg.pattern_form is "rigid").
+    (the rigid bodies of VG-COEF-RIGID when cfg.pattern_form is "rigid", the oscillators of
+    VG-COEF-HARM when "harmonic").
     """
     check_time("t", t)
     check_array("z", z, (None, params["mix"][0][0].shape[0]))
@@ -57,6 +59,8 @@ def motion_patterns_at(params, times, cfg):
     """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them."""
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns(params["time"], times[:, None, None], cfg.max_time)
+    if cfg.pattern_form == "harmonic":
+        return harmonic_velocity_patterns(*params["time"][0], times[:, None, None])
     out = mlp(params["time"], positional_encoding(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
     return out.reshape(times.shape[0], -1, 12)
 
@@ -88,6 +92,22 @@ def rigid_velocity_patterns_jet(B, t, max_time):
     omega, c, c_dot, c_ddot = _rigid_centre(B, t, max_time)
     P = _rigid_columns(c_dot - torch.linalg.cross(omega, c), omega)
     return P, _rigid_columns(c_ddot - torch.linalg.cross(omega, c_dot), torch.zeros_like(omega))
+
+
+def harmonic_velocity_patterns(C, omega, t):
+    """P(t) of oscillators (VG-COEF-HARM): C (3, K, 12) rows (a, b, c) per pattern, omega (1,)
+    their shared frequency; t: a tensor that broadcasts against (K, 1), e.g. (S, 1, 1) ->
+    (..., K, 12), P = a + b cos(Omega t) + c sin(Omega t)."""
+    return harmonic_velocity_patterns_jet(C, omega, t)[0]
+
+
+def harmonic_velocity_patterns_jet(C, omega, t):
+    """(P, dP/dt) of `harmonic_velocity_patterns`, both (..., K, 12):
+    dP/dt = Omega (c cos(Omega t) - b sin(Omega t))."""
+    a, b, c = C.unbind(0)
+    theta = omega * t
+    cos, sin = torch.cos(theta), torch.sin(theta)
+    return a + b * cos + c * sin, omega * (c * cos - b * sin)
 
 
 def _rigid_centre(B, t, max_time):

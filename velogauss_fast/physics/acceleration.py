@@ -1,6 +1,7 @@
 """Acceleration field a(x, t) = Phi(x) alpha(t, E(gamma(x))), in torch.
 
-Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC and VG-ACC-RIGID).
+Twin of `velogauss_ref.physics.acceleration` (spec/physics.md, VG-ACC, VG-ACC-RIGID and
+VG-ACC-HARM).
 """
 
 import torch
@@ -16,7 +17,8 @@ def acceleration_field(params, x, t, cfg):
     """a(x, t) = Phi(x) alpha(t, m(z)) with z = E(gamma(x)), masked by cfg.acc_mask (VG-ACC, VG-ACC-RIGID).
 
     params: motion parameter dict (uses "code", "mix" and "acc": Q (ACC_POLY_DEGREE + 1, K, 12)
-    when cfg.acc_form is "poly", R (K, 12) when "rigid"); x: (N, 3) points; t: scalar time;
+    when cfg.acc_form is "poly", R (K, 12) when "rigid", Q (2 ACC_HARMONICS + 1, K, 12) and the
+    patterns' frequency, "time"[0][1], when "harmonic"); x: (N, 3) points; t: scalar time;
     cfg: MotionConfig -> a: (N, 3), world units per unit time squared. All-zero Q (scenes
     without acceleration) gives a = 0.
     The acceleration's own mask cfg.acc_mask, not the velocity's cfg.mask, applies: the
@@ -30,13 +32,16 @@ def acceleration_field(params, x, t, cfg):
 
 def acceleration_coefficients(params, t, m, cfg):
     """alpha (N, 12), masked by cfg.acc_mask, for mixing weights m (N, K): m sum_d Q_d t^d
-    (VG-ACC) or rigid_patterns(m R, t) (VG-ACC-RIGID). The coefficients `acceleration_field`
+    (VG-ACC), rigid_patterns(m R, t) (VG-ACC-RIGID) or m harmonic_patterns(Q, Omega, t)
+    (VG-ACC-HARM). The coefficients `acceleration_field`
     applies Phi(x) to, for callers that already hold m at the points (the physics residuals
     share it with the velocity)."""
     check_time("t", t)
     check_array("m", m, (None, cfg.n_patterns))
     if cfg.acc_form == "poly":
         return masked(m @ polynomial_patterns(params["acc"], t), cfg.acc_mask)
+    if cfg.acc_form == "harmonic":
+        return masked(m @ harmonic_patterns(params["acc"], params["time"][0][1], t), cfg.acc_mask)
     # The rigid bodies' parameters are mixed, not their accelerations: a mixture of rigid
     # accelerations with different spins and centres is a general quadratic in t again.
     return masked(rigid_patterns(m @ params["acc"], t), cfg.acc_mask)
@@ -49,6 +54,17 @@ def polynomial_patterns(Q, t):
     for Qd in Q.flip(0)[1:]:
         out = out * t + Qd
     return out
+
+
+def harmonic_patterns(Q, omega, t):
+    """sum_d Q_d phi_d(Omega t) (VG-ACC-HARM): Q (2 J + 1, K, 12), omega (1,) the patterns'
+    frequency, t scalar -> (K, 12), with phi = (1, cos theta, sin theta, ..., cos J theta,
+    sin J theta), J = ACC_HARMONICS."""
+    theta = omega * t  # [1]
+    phi = [torch.ones_like(theta)]
+    for j in range(1, (Q.shape[0] - 1) // 2 + 1):
+        phi += [torch.cos(j * theta), torch.sin(j * theta)]
+    return (Q * torch.stack(phi)[:, :, None]).sum(0)
 
 
 def rigid_patterns(R, t):

@@ -25,7 +25,8 @@ from torch.func import jvp
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.basis import affine_from_coefficients
-from velogauss_fast.motion.coefficients import masked, mixing_weights_jet, rigid_velocity_patterns_jet
+from velogauss_fast.motion.coefficients import (harmonic_velocity_patterns_jet, masked, mixing_weights_jet,
+                                               rigid_velocity_patterns_jet)
 from velogauss_fast.motion.scalars import check_time, time_tensor
 from velogauss_fast.motion.velocity import mlp_velocity, velocity
 from velogauss_fast.nn import mlp_jet, positional_encoding_jet
@@ -96,6 +97,8 @@ def _patterns_and_rate(params, t, cfg, like):
     t0 = time_tensor(t, like)[:, None]  # [1, 1]
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns_jet(params["time"], t0, cfg.max_time)
+    if cfg.pattern_form == "harmonic":
+        return harmonic_velocity_patterns_jet(*params["time"][0], t0)
     gamma, d_gamma = positional_encoding_jet(t0, cfg.n_freqs_t)  # [1, E], [1, 1, E]
     P, dP_dt = mlp_jet(params["time"], gamma, d_gamma)  # [1, 12 K], [1, 1, 12 K]
     return P.reshape(-1, 12), dP_dt.reshape(-1, 12)

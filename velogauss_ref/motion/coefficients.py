@@ -1,6 +1,6 @@
 """Basis coefficients w(t, z) = m(z) P(t) from K motion patterns.
 
-spec/motion.md, VG-COEF and VG-COEF-RIGID.
+spec/motion.md, VG-COEF, VG-COEF-RIGID and VG-COEF-HARM.
 """
 
 import math
@@ -47,10 +47,13 @@ def motion_patterns(params, t, cfg):
     """P(t) = reshape(mlp(params["time"], gamma(t)), (K, 12)): the K motion patterns at t.
 
     gamma with cfg.n_freqs_t frequencies (0: raw t, which does not repeat periodically
-    into the future); K = cfg.n_patterns.
+    into the future); K = cfg.n_patterns. The rigid bodies of VG-COEF-RIGID under
+    cfg.pattern_form "rigid", the oscillators of VG-COEF-HARM under "harmonic".
     """
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns(params["time"], t, cfg.max_time)
+    if cfg.pattern_form == "harmonic":
+        return harmonic_velocity_patterns(*params["time"][0], t)
     gamma_t = positional_encoding(np.reshape(t, (1,)), cfg.n_freqs_t)
     return np.reshape(mlp(params["time"], gamma_t), (cfg.n_patterns, N_BASIS))
 
@@ -84,6 +87,21 @@ def rigid_velocity_patterns(B, t, max_time):
                                     for j in range(len(others))) / scale)
     translation = c_dot - np.cross(omega, c)
     return np.concatenate([translation, omega, np.zeros((np.shape(B)[0], 6))], axis=1)
+
+
+def harmonic_velocity_patterns(C, omega, t):
+    """P(t) (K, 12) of K oscillators sharing one frequency (VG-COEF-HARM).
+
+    C: (3, K, 12), the blocks (a, b, c) of 12 basis coefficients per pattern; omega: (1,), the
+    frequency in radians per unit time; scalar t. P_k(t) = a_k + b_k cos(Omega t) + c_k
+    sin(Omega t): every pattern's velocity oscillates about its mean a_k, and keeps doing so
+    past the observed window. A mixture of them is again such an oscillator.
+    """
+    check_array("C", C, (3, None, N_BASIS))
+    check_array("omega", omega, (1,))
+    check_scalar("t", t)
+    theta = omega[0] * t
+    return C[0] + C[1] * np.cos(theta) + C[2] * np.sin(theta)
 
 
 def masked(w, mask):

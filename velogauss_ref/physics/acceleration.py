@@ -1,13 +1,14 @@
 """Acceleration field a(x, t) = Phi(x) alpha(t, E(gamma(x))).
 
-spec/physics.md, VG-ACC (a polynomial in t per motion pattern) and VG-ACC-RIGID (a rigid
-body's acceleration per motion pattern).
+spec/physics.md, VG-ACC (a polynomial in t per motion pattern), VG-ACC-RIGID (a rigid
+body's acceleration per motion pattern) and VG-ACC-HARM (harmonics of each oscillating
+pattern's frequency).
 """
 
 import autograd.numpy as np
 
 from velogauss_ref.checks import check_array, check_scalar
-from velogauss_core.constants import ACC_POLY_DEGREE
+from velogauss_core.constants import ACC_HARMONICS, ACC_POLY_DEGREE
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import masked, mixing_weights
 from velogauss_core.motion import N_BASIS
@@ -15,11 +16,14 @@ from velogauss_ref.motion.velocity import velocity
 
 
 def acceleration_field(params, x, t, cfg):
-    """a(x, t) = Phi(x) alpha with z = E(gamma(x)), m = m(z) and (VG-ACC, VG-ACC-RIGID)
-    alpha = m sum_d Q_d t^d ("poly") or alpha = rigid_patterns(m R, t) ("rigid").
+    """a(x, t) = Phi(x) alpha with z = E(gamma(x)), m = m(z) and (VG-ACC, VG-ACC-RIGID,
+    VG-ACC-HARM) alpha = m sum_d Q_d t^d ("poly"), alpha = rigid_patterns(m R, t) ("rigid") or
+    alpha = m harmonic_patterns(Q, Omega, t) ("harmonic", harmonics of Omega t).
 
     params: motion parameter dict (uses "code", "mix" and "acc": Q (ACC_POLY_DEGREE + 1, K, 12)
-    when cfg.acc_form is "poly", R (K, 12) when it is "rigid"); x: (N, 3) points; t: scalar
+    when cfg.acc_form is "poly", R (K, 12) when it is "rigid", Q (2 ACC_HARMONICS + 1, K, 12)
+    and the patterns' frequency Omega = params["time"][0][1] (VG-COEF-HARM) when it is
+    "harmonic"); x: (N, 3) points; t: scalar
     time, any real value; cfg: MotionConfig -> a: (N, 3), world units per unit of normalised
     time squared.
     alpha is masked by cfg.acc_mask (not cfg.mask: the acceleration of a masked velocity
@@ -28,11 +32,14 @@ def acceleration_field(params, x, t, cfg):
     """
     check_array("x", x, (None, 3))
     check_scalar("t", t)
-    shape = (ACC_POLY_DEGREE + 1, cfg.n_patterns, N_BASIS) if cfg.acc_form == "poly" else (cfg.n_patterns, N_BASIS)
+    shape = {"poly": (ACC_POLY_DEGREE + 1, cfg.n_patterns, N_BASIS), "rigid": (cfg.n_patterns, N_BASIS),
+             "harmonic": (2 * ACC_HARMONICS + 1, cfg.n_patterns, N_BASIS)}[cfg.acc_form]
     check_array('params["acc"]', params["acc"], shape)
     m = mixing_weights(params, physics_code(params, x, cfg))
     if cfg.acc_form == "poly":
         alpha = m @ polynomial_patterns(params["acc"], t)
+    elif cfg.acc_form == "harmonic":
+        alpha = m @ harmonic_patterns(params["acc"], params["time"][0][1], t)
     else:
         # The rigid bodies' parameters are mixed, not their accelerations: a mixture of rigid
         # accelerations with different spins and centres is a general quadratic in t again.
@@ -50,6 +57,21 @@ def polynomial_patterns(Q, t):
     for d in range(np.shape(Q)[0]):
         total = total + Q[d] * power
         power = power * t
+    return total
+
+
+def harmonic_patterns(Q, omega, t):
+    """sum_d Q_d phi_d(Omega t) (VG-ACC-HARM): the acceleration of each oscillating motion
+    pattern, at the frequency the patterns share.
+
+    Q: (2 J + 1, K, 12); omega: (1,) the patterns' frequency; scalar t -> (K, 12), with
+    phi(theta) = (1, cos theta, sin theta, cos 2 theta, sin 2 theta, ..., cos J theta, sin J theta).
+    """
+    check_array("omega", omega, (1,))
+    theta = omega[0] * t
+    total = Q[0]
+    for j in range(1, (np.shape(Q)[0] - 1) // 2 + 1):
+        total = total + Q[2 * j - 1] * np.cos(j * theta) + Q[2 * j] * np.sin(j * theta)
     return total
 
 

@@ -17,12 +17,14 @@ from velogauss_ref.motion import coefficients as ref
 times = st.sampled_from([0.0, 0.37, 1.0, -2.5, 6.0])
 
 
-@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID")
+@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID", "VG-COEF-HARM")
 @DEVICE_SETTINGS
 @given(seed=st.integers(0, 2**32 - 1), t=times, n_freqs_t=st.integers(0, 2), masked=st.booleans(),
-       n=st.sampled_from([0, 1, 6]), pattern_form=st.sampled_from(["mlp", "rigid"]), knots=st.sampled_from([2, 3]))
+       n=st.sampled_from([0, 1, 6]), pattern_form=st.sampled_from(["mlp", "rigid", "harmonic"]),
+       knots=st.sampled_from([2, 3]))
 def test_reference_vs_fast(device, seed, t, n_freqs_t, masked, n, pattern_form, knots):
-    # pattern_form "rigid": VG-COEF-RIGID's patterns (n_freqs_t does not enter them).
+    # pattern_form "rigid" or "harmonic": VG-COEF-RIGID's or VG-COEF-HARM's patterns
+    # (n_freqs_t does not enter them).
     cfg = small_cfg(n_freqs_t=n_freqs_t, mask=RIGID_MASK if masked else None, pattern_form=pattern_form,
                     max_time=0.6, rigid_knots=knots)
     params = random_params(seed, cfg)
@@ -56,9 +58,10 @@ def test_convex_combination_of_patterns_and_mask(device, seed, t):
     torch.testing.assert_close(same_z, same_z[:1].expand_as(same_z), rtol=0, atol=1e-14)
 
 
-@pytest.mark.spec("VG-COEF")
-def test_gradcheck(device):
-    cfg = small_cfg(mask=RIGID_MASK)
+@pytest.mark.spec("VG-COEF", "VG-COEF-HARM")
+@pytest.mark.parametrize("pattern_form", ["mlp", "harmonic"])
+def test_gradcheck(device, pattern_form):
+    cfg = small_cfg(mask=RIGID_MASK, pattern_form=pattern_form)
     z = np.random.default_rng(0).standard_normal((3, cfg.code_dim))
     gradcheck_fn(coefficients, (random_params(0, cfg), 0.4, z, cfg), diff=(0, 1, 2), device=device)
 

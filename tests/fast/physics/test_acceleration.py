@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, TRANSLATION_MASK, check_agreement, check_float32,
                                      constant_coefficient_params, gradcheck_fn, random_params, small_cfg, to_torch)
-from velogauss_fast.physics.acceleration import acceleration_field, rigid_patterns
+from velogauss_fast.physics.acceleration import acceleration_field, harmonic_patterns, rigid_patterns
 from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_ref.physics import acceleration as ref
 
@@ -99,6 +99,28 @@ def test_rigid_reference_vs_fast(device, seed, t, n):
     check_float32(ref.acceleration_field, acceleration_field, args, device)
     R = np.random.default_rng(seed).standard_normal((5, 12))
     check_agreement(ref.rigid_patterns, rigid_patterns, (R, t), diff=(0, 1), device=device, seed=seed)
+
+
+@pytest.mark.spec("VG-ACC-HARM")
+@DEVICE_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.5, -2.0, 9.0]), n=st.sampled_from([0, 1, 6]))
+def test_harmonic_reference_vs_fast(device, seed, t, n):
+    cfg = small_cfg(pattern_form="harmonic", acc_form="harmonic")
+    x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
+    args = (random_params(seed, cfg), x, t, cfg)
+    check_agreement(ref.acceleration_field, acceleration_field, args, diff=(0, 1, 2), device=device, seed=seed)
+    check_float32(ref.acceleration_field, acceleration_field, args, device)
+    rng = np.random.default_rng(seed)
+    Q, omega = rng.standard_normal((5, 4, 12)), rng.uniform(1, 20, 1)
+    check_agreement(ref.harmonic_patterns, harmonic_patterns, (Q, omega, t), diff=(0, 1, 2), device=device,
+                    seed=seed)
+
+
+@pytest.mark.spec("VG-ACC-HARM")
+def test_harmonic_gradcheck(device):
+    cfg = small_cfg(pattern_form="harmonic", acc_form="harmonic")
+    x = np.random.default_rng(0).uniform(-1, 1, (3, 3))
+    gradcheck_fn(acceleration_field, (random_params(0, cfg), x, 0.7, cfg), diff=(0, 1, 2), device=device)
 
 
 @pytest.mark.spec("VG-ACC-RIGID")

@@ -20,14 +20,14 @@ def ref_both(params, x, t, cfg):
 
 cases = dict(seed=st.integers(0, 2**32 - 1), t=st.sampled_from([0.0, 0.4, -1.5, 7.0]), masked=st.booleans(),
              n=st.sampled_from([0, 1, 3]), n_freqs_t=st.integers(0, 2),
-             pattern_form=st.sampled_from(["mlp", "rigid"]))
+             pattern_form=st.sampled_from(["mlp", "rigid", "harmonic"]))
 
 
 def _args(seed, t, masked, n, n_freqs_t, pattern_form):
-    # pattern_form "rigid" (VG-COEF-RIGID): the fast path's closed-form dP/dt against the
-    # reference's autograd.
+    # pattern_form "rigid" or "harmonic" (VG-COEF-RIGID, VG-COEF-HARM with VG-ACC-HARM): the
+    # fast path's closed-form dP/dt against the reference's autograd.
     cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t, pattern_form=pattern_form,
-                    max_time=0.6, rigid_knots=2 + seed % 2)
+                    max_time=0.6, rigid_knots=2 + seed % 2, acc_form="harmonic" if pattern_form == "harmonic" else "poly")
     x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
     return (random_params(seed, cfg), x, t, cfg)
 

@@ -9,8 +9,9 @@ from hypothesis.extra import numpy as hnp
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import FD_STEP, RIGID_MASK, TRANSLATION_MASK, flat_params, random_params, small_cfg
 from velogauss_ref.motion import coefficients as coef_module
-from velogauss.scenes.motions import RigidMotion
-from velogauss_ref.motion.coefficients import coefficients, mixing_weights, rigid_velocity_patterns
+from velogauss.scenes.motions import PeriodicFlowMotion, RigidMotion
+from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
+                                              rigid_velocity_patterns)
 from velogauss_ref.nn import mlp, positional_encoding
 
 seeds = st.integers(0, 2**32 - 1)
@@ -89,10 +90,10 @@ def test_mask_zeroes_exactly_the_unselected_columns(mask):
     assert np.all(w[:, ~mask] != 0.0)  # the mask, not the parameters, zeroes them
 
 
-@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID")
+@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID", "VG-COEF-HARM")
 @pytest.mark.parametrize("masked", [False, True])
 @given(seed=seeds, t=st.floats(-3, 3), z=hnp.arrays(np.float64, (3, 3), elements=st.floats(-2, 2)),
-       n_freqs_t=st.integers(0, 2), pattern_form=st.sampled_from(["mlp", "rigid"]))
+       n_freqs_t=st.integers(0, 2), pattern_form=st.sampled_from(["mlp", "rigid", "harmonic"]))
 def test_coefficients_gradient(masked, seed, t, z, n_freqs_t, pattern_form):
     cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t, pattern_form=pattern_form,
                     max_time=0.75)
@@ -133,6 +134,35 @@ def test_rigid_patterns_are_rigid_fields_with_a_constant_spin(seed, t, n):
     fits = [np.polyfit(nodes, B[k, 3:].reshape(n, 3), n - 1) for k in range(5)]  # [n powers, 3]
     rate = np.stack([np.polyval(np.polyder(f[:, j]), t) for f in fits for j in range(3)]).reshape(5, 3)
     np.testing.assert_allclose(still[:, :3], rate, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.spec("VG-COEF-HARM")
+@pytest.mark.parametrize("generator", [np.diag([0.47, -0.235, -0.235]), [[0.2, 0.0, 0.6], [0.0, -0.4, 0.1],
+                                                                        [0.6, 0.1, 0.2]]])
+def test_harmonic_patterns_are_the_pulsing_body_at_every_time(generator):
+    # velogauss.scenes' analytic periodic flow x - c = expm(sin(w t) L)(x0 - c), off the
+    # origin: its velocity w cos(w t) L (x - c) has the coefficients cos(w t) w(0). Patterns
+    # with Omega = w, a = c = 0 and b = w(0) give them inside the window and for several
+    # periods past it, where no polynomial in t could follow.
+    body = PeriodicFlowMotion(centre=(0.3, -0.2, 0.1), generator=generator, omega=3 * np.pi)
+    C = np.zeros((3, 4, 12))
+    C[1] = body.basis_coefficients(0.0)
+    for t in (0.0, 0.1, 0.5, 0.75, 1.0, 2.3):
+        P = harmonic_velocity_patterns(C, np.array([body.omega]), t)
+        np.testing.assert_allclose(P, np.broadcast_to(body.basis_coefficients(t), P.shape), rtol=0, atol=1e-12)
+
+
+@pytest.mark.spec("VG-COEF-HARM")
+@given(seed=seeds, t=st.floats(-2, 3), omega=st.floats(0.5, 30))
+def test_harmonic_patterns_repeat_with_their_period(seed, t, omega):
+    # The patterns return to their values after the period 2 pi / Omega, and still
+    # oscillators (b = c = 0) are their means a at every time.
+    C = np.random.default_rng(seed).standard_normal((3, 4, 12))
+    P = harmonic_velocity_patterns(C, np.array([omega]), t)
+    later = harmonic_velocity_patterns(C, np.array([omega]), t + 2 * np.pi / omega)
+    np.testing.assert_allclose(later, P, rtol=0, atol=1e-9)
+    still = np.stack([C[0], np.zeros((4, 12)), np.zeros((4, 12))])
+    np.testing.assert_array_equal(harmonic_velocity_patterns(still, np.array([omega]), t), C[0])
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,7 @@
 """velogauss_ref.physics.acceleration: VG-ACC, a(x, t) = Phi(x) alpha(t, E(gamma(x))) with a
 degree-ACC_POLY_DEGREE polynomial in t per motion pattern and its own column mask, and
-VG-ACC-RIGID, a rigid body's acceleration per motion pattern."""
+VG-ACC-RIGID, a rigid body's acceleration per motion pattern, and VG-ACC-HARM, harmonics of
+each oscillating pattern's frequency."""
 
 import autograd.numpy as anp
 import numpy as np
@@ -17,7 +18,8 @@ from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_core.motion import init_motion_params
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import mixing_weights
-from velogauss_ref.physics.acceleration import acceleration_field, rigid_patterns
+from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion
+from velogauss_ref.physics.acceleration import acceleration_field, harmonic_patterns, rigid_patterns
 
 seeds = st.integers(0, 2**32 - 1)
 points = hnp.arrays(np.float64, (5, 3), elements=st.floats(-1.5, 1.5))
@@ -204,3 +206,46 @@ def test_rigid_form_mixes_the_bodies_not_their_accelerations(seed, x, t):
     expected = g + np.cross(omega, np.cross(omega, x - c))
     got = acceleration_field(params, x, t, cfg)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * (1 + np.abs(expected).max()))
+
+
+@pytest.mark.spec("VG-ACC-HARM")
+@settings(max_examples=10)
+@given(x=points, t=st.floats(-1, 3))
+def test_harmonic_form_is_the_material_acceleration_of_a_pulsing_body(x, t):
+    # Oracle: velogauss.scenes' periodic flow, whose material acceleration is
+    # w^2 (cos^2(w t) L^2 - sin(w t) L)(x - c) = w^2 ((1 + cos 2wt) / 2 L^2 - sin(wt) L)(x - c):
+    # harmonics 0, 1 and 2 of w. The basis coefficients of a field M (x - c) are those of a
+    # linear flow with generator M at t = 0.
+    L = np.array([[0.2, 0.0, 0.6], [0.0, -0.4, 0.1], [0.6, 0.1, 0.2]])
+    centre, w = (0.3, -0.2, 0.1), 3 * np.pi
+    body = PeriodicFlowMotion(centre=centre, generator=L, omega=w)
+    of = lambda M: LinearFlowMotion(centre=centre, generator=M).basis_coefficients(0.0)  # noqa: E731
+    Q = w * w * np.stack([of(L @ L) / 2, np.zeros(12), -of(L), of(L @ L) / 2, np.zeros(12)])
+    cfg = small_cfg(pattern_form="harmonic", acc_form="harmonic")
+    params = random_params(0, cfg)
+    params["time"] = [(params["time"][0][0], np.array([w]))]
+    params["acc"] = np.tile(Q[:, None, :], (1, cfg.n_patterns, 1))
+    expected = body.acceleration(x, t)
+    got = acceleration_field(params, x, t, cfg)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10 * (1 + np.abs(expected).max()))
+
+
+@pytest.mark.spec("VG-ACC-HARM")
+def test_harmonic_patterns_by_hand():
+    # Omega t = pi / 2: phi = (1, cos, sin, cos 2, sin 2) = (1, 0, 1, -1, 0).
+    Q = np.arange(5 * 2 * 12, dtype=np.float64).reshape(5, 2, 12)
+    omega = np.array([2 * np.pi])
+    np.testing.assert_allclose(harmonic_patterns(Q, omega, 0.25), Q[0] + Q[2] - Q[3], rtol=0, atol=1e-12)
+
+
+@pytest.mark.spec("VG-ACC-HARM")
+@settings(max_examples=10)
+@given(seed=seeds, x=hnp.arrays(np.float64, (3, 3), elements=st.floats(-1.5, 1.5)), t=st.floats(-3, 3))
+def test_harmonic_acceleration_field_gradient(seed, x, t):
+    # The frequency sits in params["time"]: the gradient reaches it through both fields.
+    cfg = small_cfg(pattern_form="harmonic", acc_form="harmonic")
+    params = random_params(seed, cfg)
+    assert params["acc"].shape == (5, cfg.n_patterns, 12)
+    theta, unflatten = flat_params(params)
+    check_grads_fd(lambda theta, x, t: acceleration_field(unflatten(theta), x, t, cfg), (theta, x, t), (0, 1, 2),
+                   np.random.default_rng(seed), step=FD_STEP)
