@@ -27,7 +27,8 @@ def test_sizes_come_first_then_masks():
     ({"max_time": 0.0}, r"max_time: expected a time in \(0, 1\], got 0.0"),
     ({"max_time": float("nan")}, r"max_time: expected a finite real scalar"),
     ({"rigid_knots": 4}, r"rigid_knots: expected 2 or 3, got 4"),
-    ({"acc_form": "harmonic"}, r"acc_form: 'harmonic' takes the harmonic patterns' frequencies, got pattern_form 'mlp'"),
+    ({"acc_form": "harmonic"}, r"acc_form: 'harmonic' takes the harmonic patterns' frequencies, got "
+                               r"pattern_form 'mlp'"),
 ])
 def test_bad_values_are_named(sizes, message):
     with pytest.raises(ValueError, match=message):

@@ -38,8 +38,9 @@ class MotionParameters(nn.Module):
 
     Attributes (each a ParameterList of W, b, W, b, ...): code (VG-CODE), mix (VG-COEF),
     time (VG-COEF, velocity "affine": the time network, VG-COEF-HARM's (C, Omega) under
-    spec.config.pattern_form "harmonic", or VG-COEF-RIGID's B, a Parameter, under "rigid"), velocity_mlp (velocity "mlp"), adf (VG-ADF); acc
-    (VG-ACC's or VG-ACC-HARM's Q or VG-ACC-RIGID's R, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
+    spec.config.pattern_form "harmonic", or VG-COEF-RIGID's B, a Parameter, under "rigid"),
+    velocity_mlp (velocity "mlp"), adf (VG-ADF); acc (VG-ACC's or VG-ACC-HARM's Q or
+    VG-ACC-RIGID's R, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
     weights (`velogauss_core.motion.init_motion_params`, then the velocity MLP's layers).
     """
 

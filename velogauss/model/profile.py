@@ -44,8 +44,9 @@ class MotionProfile:
     velocity's basis columns; acceleration: the VG-ACC term is built; acc_mask: 12 bools,
     its columns; acc_form: its time dependence, "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or
     "harmonic" (VG-ACC-HARM); divergence: the VG-DIV loss is used; pattern_form: the motion
-    patterns' time dependence, "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID) or "harmonic" (VG-COEF-HARM); rigid_knots: VG-COEF-RIGID's knots per
-    centre, 3 (under gravity) or 2 (uniform drift). acc_form defaults to "poly" and pattern_form
+    patterns' time dependence, "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID) or "harmonic"
+    (VG-COEF-HARM); rigid_knots: VG-COEF-RIGID's knots per centre, 3 (under gravity) or 2
+    (uniform drift). acc_form defaults to "poly" and pattern_form
     to "mlp", what every checkpoint saved before the rigid forms existed used.
     """
 

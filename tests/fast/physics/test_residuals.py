@@ -27,7 +27,8 @@ def _args(seed, t, masked, n, n_freqs_t, pattern_form):
     # pattern_form "rigid" or "harmonic" (VG-COEF-RIGID, VG-COEF-HARM with VG-ACC-HARM): the
     # fast path's closed-form dP/dt against the reference's autograd.
     cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t, pattern_form=pattern_form,
-                    max_time=0.6, rigid_knots=2 + seed % 2, acc_form="harmonic" if pattern_form == "harmonic" else "poly")
+                    max_time=0.6, rigid_knots=2 + seed % 2,
+                    acc_form="harmonic" if pattern_form == "harmonic" else "poly")
     x = np.random.default_rng(seed).uniform(-1.5, 1.5, (n, 3))
     return (random_params(seed, cfg), x, t, cfg)
 
