@@ -92,6 +92,10 @@ HARMONIC_CYCLES_INIT = 1.0
 FREQ_SCAN_CYCLES = (0.25, 3.0)
 FREQ_SCAN_STEP = 0.025
 FREQ_SCAN_MIN_FRAMES = 4
+# At most this many pixels per camera enter the scan, an even stride through the image: each
+# pixel's series carries the frequency whole, and 65,536 of them (a 256² image) keep the
+# series of a 100-frame camera at 50 MB in float64, where an 800² capture would need 500 MB.
+FREQ_SCAN_PIXELS = 65536
 # VG-ACC-HARM: harmonics of each pattern's frequency in its acceleration. The material
 # acceleration (dL/dt + L^2) x of an oscillating affine field L(t) = a + b cos + c sin holds
 # the frequencies 0, Omega (dL/dt) and 2 Omega (L^2), and nothing higher.

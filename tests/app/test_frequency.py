@@ -37,6 +37,13 @@ def test_the_scan_finds_the_frequency_the_pixels_oscillate_at(cycles):
     assert abs(found - omega) <= 2 * np.pi * FREQ_SCAN_STEP / WINDOW
 
 
+def test_a_large_video_is_scanned_through_a_pixel_stride(monkeypatch):
+    # Fewer pixels than the image has (FREQ_SCAN_PIXELS): the same frequency from a stride.
+    omega = 2 * np.pi * 1.7 / WINDOW
+    monkeypatch.setattr("velogauss.train.frequency.FREQ_SCAN_PIXELS", 10)
+    assert abs(video_frequency(_video(omega), WINDOW) - omega) <= 2 * np.pi * FREQ_SCAN_STEP / WINDOW
+
+
 def test_frames_past_the_window_do_not_count():
     inside = 2 * np.pi * 1.4 / WINDOW
     found = video_frequency(_video(inside, after=3 * inside), WINDOW)

@@ -14,7 +14,7 @@ trace(H(Ω) Y Yᵀ): one S × S Gram matrix per camera, whatever the image size.
 import numpy as np
 import torch
 
-from velogauss_core.constants import FREQ_SCAN_CYCLES, FREQ_SCAN_MIN_FRAMES, FREQ_SCAN_STEP
+from velogauss_core.constants import FREQ_SCAN_CYCLES, FREQ_SCAN_MIN_FRAMES, FREQ_SCAN_PIXELS, FREQ_SCAN_STEP
 
 
 def video_frequency(frames, max_time):
@@ -43,7 +43,8 @@ def candidate_frequencies(max_time):
 
 def _series_by_camera(frames, max_time):
     """(times (S,), grey-level series (S, P) with each pixel's mean removed) per camera that
-    saw at least FREQ_SCAN_MIN_FRAMES distinct times in the window."""
+    saw at least FREQ_SCAN_MIN_FRAMES distinct times in the window; P is at most
+    FREQ_SCAN_PIXELS, an even stride through the image."""
     cameras = {}
     for frame in frames:
         if frame.time <= max_time:
@@ -52,7 +53,9 @@ def _series_by_camera(frames, max_time):
     for by_time in cameras.values():
         if len(by_time) >= FREQ_SCAN_MIN_FRAMES:
             times = np.array(sorted(by_time))
-            series = np.stack([np.asarray(by_time[t], dtype=np.float64).mean(-1).ravel() for t in times])
+            first = np.asarray(by_time[times[0]])
+            stride = -(-first.shape[0] * first.shape[1] // FREQ_SCAN_PIXELS)  # ceiling division
+            series = np.stack([np.asarray(by_time[t], dtype=np.float64).mean(-1).ravel()[::stride] for t in times])
             yield times, series - series.mean(0)
 
 
