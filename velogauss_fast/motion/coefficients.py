@@ -97,17 +97,23 @@ def rigid_velocity_patterns_jet(B, t, max_time):
 def harmonic_velocity_patterns(C, omega, t):
     """P(t) of oscillators (VG-COEF-HARM): C (3, K, 12) rows (a, b, c) per pattern, omega (1,)
     their shared frequency; t: a tensor that broadcasts against (K, 1), e.g. (S, 1, 1) ->
-    (..., K, 12), P = a + b cos(Omega t) + c sin(Omega t)."""
-    return harmonic_velocity_patterns_jet(C, omega, t)[0]
+    (..., K, 12), P = a + b cos(Omega t) + c sin(Omega t). The forward pass (trajectories,
+    rendering) builds no rate: that is `harmonic_velocity_patterns_jet`'s."""
+    (a, b, c), cos, sin = C.unbind(0), *_phase(omega, t)
+    return a + b * cos + c * sin
 
 
 def harmonic_velocity_patterns_jet(C, omega, t):
     """(P, dP/dt) of `harmonic_velocity_patterns`, both (..., K, 12):
     dP/dt = Omega (c cos(Omega t) - b sin(Omega t))."""
-    a, b, c = C.unbind(0)
-    theta = omega * t
-    cos, sin = torch.cos(theta), torch.sin(theta)
+    (a, b, c), cos, sin = C.unbind(0), *_phase(omega, t)
     return a + b * cos + c * sin, omega * (c * cos - b * sin)
+
+
+def _phase(omega, t):
+    """(cos(Omega t), sin(Omega t)) of VG-COEF-HARM, shared by the patterns and their jet."""
+    theta = omega * t
+    return torch.cos(theta), torch.sin(theta)
 
 
 def _rigid_centre(B, t, max_time):
