@@ -49,6 +49,10 @@ Count = _int(ge=1)
 Every = _int(ge=0)  # an interval in iterations; 0 disables
 _STRICT = ConfigDict(extra="forbid")
 Placement = Literal["box", "gaussians"]  # where VG-LOSS-PHYS's collocation points are drawn
+# A schedule key: a number of iterations, or "auto", its share of train.iterations in
+# SCHEDULE (resolve_schedule). Intervals (`Period`) are at least 1 iteration when "auto".
+Span = Union[Literal["auto"], _int(ge=0)]
+Period = Union[Literal["auto"], Every]
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -128,8 +132,10 @@ class TrainConfig:
     # small operations, one compositing thread per available core (velogauss.threads, which
     # says why). More than a machine has cores only makes threads wait for each other.
     threads: _int(ge=0, le=1024) = 0
-    warmup: _int(ge=0) = 200  # iterations on the t = 0 frames only, motion frozen
-    curriculum: _int(ge=0) = 1200  # iterations over which the sampled times open up to max_time
+    # The schedule's keys (here, physics.ramp and densify's) default to "auto": their share
+    # of `iterations` in SCHEDULE, so a longer or shorter run keeps the schedule's shape.
+    warmup: Span = "auto"  # iterations on the t = 0 frames only, motion frozen
+    curriculum: Span = "auto"  # iterations over which the sampled times open up to max_time
     # Training views rendered per iteration, all at one time (velogauss.train.sampling): the
     # state at that time is computed once and seen from several cameras, so a Gaussian's
     # position, and the velocity that carries it, is constrained in depth within one step.
@@ -176,7 +182,7 @@ class PhysicsConfig:
     # A negative weight would reward breaking the physics.
     lambda_transport: _float(ge=0.0) = 1e-3
     lambda_div: _float(ge=0.0) = 1e-3
-    ramp: _int(ge=0) = 1200  # iterations over which both weights rise linearly from 0
+    ramp: Span = "auto"  # iterations over which both weights rise linearly from 0
     n_points: Count = 1024  # collocation points per iteration, one random time each
     bounds_margin: _float(ge=0.0) = 0.1  # the box grows by this fraction of its size on each side
     # Where the collocation points lie: "box" uniform in the grown box, "gaussians" near the
@@ -194,9 +200,9 @@ class PhysicsConfig:
 class DensifyConfig:
     """Adaptive density control (3DGS): clone, split, prune, opacity reset."""
 
-    start: _int(ge=0) = 200
-    until: _int(ge=0) = 2000
-    every: Count = 100
+    start: Span = "auto"
+    until: Span = "auto"
+    every: Union[Literal["auto"], Count] = "auto"
     # Mean |d loss / d mean2d| in NDC units. 3DGS uses 2e-4 on ~800 px images; on the
     # 64 px synthetic scenes that cloned whole objects into ~20k Gaussians while the
     # motion is still misfit, so the default is stricter. At 128 px it gives about the same
@@ -204,9 +210,9 @@ class DensifyConfig:
     grad_threshold: _float(gt=0.0) = 5e-4
     percent_dense: Unit = 0.01  # clone below, split above this fraction of the extent
     prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # at 1 every Gaussian would be pruned
-    opacity_reset_every: Every = 1000
+    opacity_reset_every: Period = "auto"
     max_gaussians: Count = 10000
-    static_every: Every = 500  # re-detect particles that do not move
+    static_every: Period = "auto"  # re-detect particles that do not move
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -219,6 +225,39 @@ class Config:
 
 
 _ADAPTER = TypeAdapter(Config)
+
+# The default schedule, in iterations of a run of SCHEDULE_ITERATIONS: the one every benchmark
+# measured (benchmarks/FIDELITY.md). An "auto" key gets its value here times
+# train.iterations / SCHEDULE_ITERATIONS, so that a run of any length warms up, opens the time
+# window, ramps the physics and densifies over the same shares of its iterations. Fixed
+# counts left a 2000-iteration run 600 iterations on the whole window, and it extrapolated
+# 5 dB worse than with the curriculum shortened to match (FIDELITY.md, section 4).
+SCHEDULE_ITERATIONS = 3000
+SCHEDULE = {"train.warmup": 200, "train.curriculum": 1200, "physics.ramp": 1200, "densify.start": 200,
+            "densify.until": 2000, "densify.every": 100, "densify.opacity_reset_every": 1000,
+            "densify.static_every": 500}
+# Intervals: scaled to 0 they would switch their step off, or divide by zero.
+_PERIODS = ("densify.every", "densify.opacity_reset_every", "densify.static_every")
+
+
+def resolve_schedule(cfg, saved=None):
+    """`cfg` with each "auto" key of SCHEDULE replaced by a number of iterations: the value the
+    config `saved` holds (the run being resumed keeps its schedule), else its SCHEDULE value
+    times `cfg.train.iterations / SCHEDULE_ITERATIONS`, rounded, intervals to at least 1.
+    Keys set to a number are kept as they are."""
+    changes = {}
+    for name, value in SCHEDULE.items():
+        section, key = name.split(".")
+        if getattr(getattr(cfg, section), key) != "auto":
+            continue
+        if saved is not None:
+            value = getattr(getattr(resolve_schedule(saved), section), key)
+        else:
+            value = round(value * cfg.train.iterations / SCHEDULE_ITERATIONS)
+            value = max(1, value) if name in _PERIODS else value
+        changes.setdefault(section, {})[key] = value
+    return dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section), **values)
+                                       for section, values in changes.items()})
 
 
 def load_config(path=None, overrides=(), flags=None):

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from velogauss.config import Config, ModelConfig, load_config, to_toml
+from velogauss.config import Config, ModelConfig, load_config, resolve_schedule, to_toml
 from velogauss_core.motion import MotionConfig, MotionSizes
 
 
@@ -24,6 +24,38 @@ def test_file_then_overrides_win(tmp_path):
     assert cfg.model.effects == ("rotation",)
     assert cfg.data.background == (0, 0, 0)
     assert cfg.model.ablation == "no-adf"
+
+
+def _schedule(cfg):
+    t, p, d = cfg.train, cfg.physics, cfg.densify
+    return (t.warmup, t.curriculum, p.ramp, d.start, d.until, d.every, d.opacity_reset_every, d.static_every)
+
+
+def test_default_schedule_is_the_measured_one_at_3000_iterations():
+    assert _schedule(load_config()) == ("auto",) * 8  # resolved only when a run starts
+    assert _schedule(resolve_schedule(load_config())) == (200, 1200, 1200, 200, 2000, 100, 1000, 500)
+
+
+def test_auto_schedule_scales_with_iterations():
+    assert _schedule(resolve_schedule(load_config(None, ["train.iterations=1500"]))) == (
+        100, 600, 600, 100, 1000, 50, 500, 250)
+    assert _schedule(resolve_schedule(load_config(None, ["train.iterations=6000"]))) == (
+        400, 2400, 2400, 400, 4000, 200, 2000, 1000)
+    # Intervals stay at least one iteration; spans may round to 0.
+    assert _schedule(resolve_schedule(load_config(None, ["train.iterations=3"]))) == (0, 1, 1, 0, 2, 1, 1, 1)
+
+
+def test_a_schedule_key_set_to_a_number_is_kept():
+    cfg = resolve_schedule(load_config(None, ["train.iterations=1500", "train.warmup=7", "densify.every=300"]))
+    assert _schedule(cfg) == (7, 600, 600, 100, 1000, 300, 500, 250)
+
+
+def test_a_resumed_run_keeps_its_schedule():
+    saved = resolve_schedule(load_config(None, ["train.iterations=1500"]))
+    grown = load_config(None, ["train.iterations=6000", "densify.every=50"])
+    cfg = resolve_schedule(grown, saved)
+    assert cfg.train.iterations == 6000
+    assert _schedule(cfg) == (100, 600, 600, 100, 1000, 50, 500, 250)
 
 
 def test_bare_word_override_is_a_string():

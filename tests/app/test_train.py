@@ -1,6 +1,7 @@
 """Tests of velogauss/train: curriculum, density control with optimiser surgery, static
 detection, atomic checkpoints, exact resume and Ctrl-C."""
 
+import dataclasses
 import json
 import signal
 import time
@@ -11,7 +12,7 @@ import pytest
 import torch
 
 from velogauss import io_utils
-from velogauss.config import load_config
+from velogauss.config import SCHEDULE, load_config, resolve_schedule
 from velogauss.data import load_scene
 from velogauss.model import build_model, scene_profile
 from velogauss.scenes import make_scene
@@ -92,7 +93,11 @@ def test_a_schedule_too_short_for_its_curriculum_warns_naming_the_keys():
     with pytest.warns(UserWarning, match=r"train.iterations = 8: .* leaving 1 iterations .* train.curriculum"):
         loop.warn_short_schedule(load_config(None, TINY + ["train.iterations=8"]).train)
     with pytest.warns(UserWarning, match="leaving 600"):
-        loop.warn_short_schedule(load_config(None, ["train.iterations=2000"]).train)
+        loop.warn_short_schedule(load_config(None, ["train.iterations=2000", "train.warmup=200",
+                                                    "train.curriculum=1200"]).train)
+    with warnings.catch_warnings():  # the "auto" schedule scales with the run
+        warnings.simplefilter("error")
+        loop.warn_short_schedule(resolve_schedule(load_config(None, ["train.iterations=2000"])).train)
 
 
 # Tests that set the time network's last layer by hand (VG-COEF), on a scene whose rigid
@@ -200,6 +205,19 @@ def test_static_particles_are_rendered_canonical(tiny_scene):
     assert torch.equal(means[~moving], x0[~moving])
     assert torch.allclose(means[moving] - x0[moving], torch.tensor([0.5, 0.0, 0.0]).expand(int(moving.sum()), 3),
                           atol=1e-5)
+
+
+def test_auto_schedule_is_recorded_and_kept_on_resume(tiny_scene, tmp_path):
+    """config.toml holds the numbers a run's "auto" schedule resolved to, and a resume that
+    trains longer keeps them rather than stretching the schedule mid-run."""
+    auto = [item for item in TINY if item.split("=")[0] not in SCHEDULE]
+    loop.train(load_config(None, auto + ["train.iterations=6"]), tiny_scene, tmp_path, progress=False)
+    first = load_config(tmp_path / "config.toml")
+    assert (first.train.warmup, first.train.curriculum, first.densify.until, first.densify.every) == (0, 2, 4, 1)
+    loop.train(load_config(None, auto + ["train.iterations=9"]), tiny_scene, tmp_path, resume=True, progress=False)
+    resumed = load_config(tmp_path / "config.toml")
+    assert resumed.train.iterations == 9
+    assert dataclasses.replace(resumed, train=dataclasses.replace(resumed.train, iterations=6)) == first
 
 
 def test_checkpoint_write_is_atomic(tiny_scene, tmp_path, monkeypatch):

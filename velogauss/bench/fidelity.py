@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from velogauss.config import load_config
+from velogauss.config import SCHEDULE, load_config
 from velogauss.data import load_scene
 from velogauss.evaluate import (MOTION_EVAL_TIMES, evaluate_split, freeze_baseline, moving_surface_points,
                                 trajectory_error, velocity_error)
@@ -88,6 +88,11 @@ COST_VARIANTS = {
     "cost-v3-euler": ["train.views=3", "model.integrator=euler"],
     "cost-v3-rk4": ["train.views=3", "model.integrator=rk4"],
 }
+# The same lengths with the schedule of 3000 iterations (fixed counts): how these runs were made
+# before the schedule scaled with train.iterations (velogauss.config.SCHEDULE).
+COST_VARIANTS.update({f"cost-v{v}-i{i}-fixed": [f"train.views={v}", f"train.iterations={i}",
+                                                 *(f"{key}={value}" for key, value in SCHEDULE.items())]
+                      for v in (1, 3) for i in (2000, 6000)})
 VARIANTS.update(COST_VARIANTS)
 DEFAULT_COST = "cost-v3-i3000"
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]

@@ -90,7 +90,7 @@ def training_loop(scene_dir, threads):
     cfg = load_config(overrides=[f"train.threads={threads}"])
     data = load_scene(scene_dir, max_time=cfg.data.max_time, background=cfg.data.background)
     loop, _ = prepare(cfg, data, tempfile.mkdtemp(prefix="velogauss-load-"))
-    return loop, cfg.train.warmup + cfg.train.curriculum
+    return loop, loop.cfg.train.warmup + loop.cfg.train.curriculum
 
 
 def training_pass(scene_dir, threads):

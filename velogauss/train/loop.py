@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from velogauss.config import check_resume_config, config_from_dict, to_toml
+from velogauss.config import check_resume_config, config_from_dict, resolve_schedule, to_toml
 from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
@@ -67,10 +67,12 @@ def train(cfg, data, run_dir, resume=False, progress=True):
 
 def warn_short_schedule(train_cfg):
     """Warn (UserWarning naming the keys) when fewer iterations train on the whole observed
-    window than the curriculum took to open it. `train.iterations=2000` with the other
-    defaults left 600 and ended below the frozen baseline; with `train.curriculum=800` the same
-    2000 iterations extrapolated 5 dB better (benchmarks/FIDELITY.md, section 4). A warning, not
-    an error: short runs are legitimate for tests and quick looks."""
+    window than the curriculum took to open it. `train.iterations=2000` with the schedule of
+    3000 iterations (warm-up 200, curriculum 1200) left 600 and ended below the frozen
+    baseline; with `train.curriculum=800` the same 2000 iterations extrapolated 5 dB better
+    (benchmarks/FIDELITY.md, section 4). The "auto" schedule never warns. A warning, not an
+    error: short runs are legitimate for tests and quick looks. `train_cfg`: a resolved
+    `TrainConfig` (config.resolve_schedule)."""
     opened = train_cfg.warmup + train_cfg.curriculum
     left = train_cfg.iterations - opened
     if train_cfg.curriculum and left < train_cfg.curriculum:
@@ -78,7 +80,8 @@ def warn_short_schedule(train_cfg):
             f"train.iterations = {train_cfg.iterations}: the time window opens fully at iteration {opened} "
             f"(train.warmup + train.curriculum), leaving {max(left, 0)} iterations on the whole window, fewer "
             f"than the curriculum's {train_cfg.curriculum}; the motion will be undertrained. Lower "
-            f"train.curriculum (and densify.until) with train.iterations.", UserWarning, stacklevel=3)
+            f"train.curriculum (and densify.until) with train.iterations, or leave them \"auto\" to scale "
+            f"with it.", UserWarning, stacklevel=3)
 
 
 def prepare(cfg, data, run_dir, resume=False):
@@ -86,17 +89,21 @@ def prepare(cfg, data, run_dir, resume=False):
 
     Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `loop.step(it)`
     and `loop.maintain(it + 1)` then run iteration `it` (the contention benchmark times them).
+    The schedule's "auto" keys are resolved here (`resolve_schedule`): for a new run from
+    `train.iterations`, on resume to the run's own values; `loop.cfg` and config.toml hold
+    the numbers used.
     """
     apply_threads(cfg.train.threads)
     check_trainable_size(data)
-    warn_short_schedule(cfg.train)
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
     extent = camera_extent([f.camera for f in data.train])
     remove_stale_temporaries(run_dir)
     if resume:
         payload = load_checkpoint(run_dir, device)
-        check_resume_config(config_from_dict(payload["config"], str(checkpoint_path(run_dir))), cfg)
+        saved = config_from_dict(payload["config"], str(checkpoint_path(run_dir)))
+        cfg = resolve_schedule(cfg, saved)
+        check_resume_config(saved, cfg)
         profile = profile_from_dict(payload["profile"])
         model = model_from_state(cfg, profile, payload["model"])
         model.load_state_dict(payload["model"])
@@ -109,6 +116,8 @@ def prepare(cfg, data, run_dir, resume=False):
         # The checkpoint and config.toml stay one truth: the changes check_resume_config allows.
         write_text(run_dir / "config.toml", to_toml(cfg))
     else:
+        cfg = resolve_schedule(cfg)
+        warn_short_schedule(cfg.train)
         rng = np.random.default_rng(cfg.train.seed)
         torch.manual_seed(cfg.train.seed)
         profile = scene_profile(cfg, data.metadata)
