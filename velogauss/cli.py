@@ -132,7 +132,8 @@ def train_command(
     effects: Optional[str] = typer.Option(
         None, help=f"Comma-separated effects the motion model may use: {','.join(EFFECTS)}."),
     ablation: Optional[Ablation] = typer.Option(None, help="Which of the paper's components to switch off."),
-    iterations: Optional[int] = typer.Option(None, help="Training iterations."),
+    iterations: Optional[int] = typer.Option(None, help="Training iterations; the schedule's \"auto\" keys (warm-up, "
+                                                         "curriculum, physics ramp, densification) scale with them."),
     resume: bool = typer.Option(
         False, "--resume", help="Continue the run in --out from its latest checkpoint; only train.iterations, "
                                  "train.device, train.threads, train.eval_every, train.checkpoint_every and data.dir "

@@ -179,8 +179,9 @@ class PhysicsConfig:
     # The residuals are O(|v|²/L) ~ 10 in normalised time, so their squares are ~100 times
     # the photometric loss at these weights: strong enough to bind the future, weak enough
     # not to drown the images' gradients while the velocity forms (measured on toss).
-    # A negative weight would reward breaking the physics.
-    lambda_transport: _float(ge=0.0) = 1e-3
+    # A negative weight would reward breaking the physics. "auto": TRANSPORT_WEIGHT, or 0 with
+    # oscillating motion patterns (resolve_transport says why).
+    lambda_transport: Union[Literal["auto"], _float(ge=0.0)] = "auto"
     lambda_div: _float(ge=0.0) = 1e-3
     ramp: Span = "auto"  # iterations over which both weights rise linearly from 0
     n_points: Count = 1024  # collocation points per iteration, one random time each
@@ -238,6 +239,30 @@ SCHEDULE = {"train.warmup": 200, "train.curriculum": 1200, "physics.ramp": 1200,
             "densify.static_every": 500}
 # Intervals: scaled to 0 they would switch their step off, or divide by zero.
 _PERIODS = ("densify.every", "densify.opacity_reset_every", "densify.static_every")
+
+
+# VG-LOSS-PHYS's transport weight where "auto" keeps the transport residual on.
+TRANSPORT_WEIGHT = 1e-3
+
+
+def resolve_transport(cfg, pattern_form, saved=None):
+    """`cfg` with an "auto" `physics.lambda_transport` replaced: by the value `saved` holds (the
+    run being resumed), else by 0 when the motion patterns oscillate (`pattern_form`
+    "harmonic", VG-COEF-HARM) and TRANSPORT_WEIGHT otherwise. A number is kept.
+
+    Why 0 there: the oscillating patterns continue the motion past the window by themselves,
+    and their acceleration (VG-ACC-HARM) lags the velocity while it trains, so the residual
+    held pulse's stretch rate 26-29 % low. Without it pulse extrapolated at 33.0 dB against
+    30.0 (velocity error 0.026 / 0.032 against 0.059 / 0.069; weight 1e-4: 31.4 dB, seed 0),
+    benchmarks/FIDELITY.md, section 8.
+    """
+    if cfg.physics.lambda_transport != "auto":
+        return cfg
+    if saved is not None:
+        weight = resolve_transport(saved, pattern_form).physics.lambda_transport
+    else:
+        weight = 0.0 if pattern_form == "harmonic" else TRANSPORT_WEIGHT
+    return dataclasses.replace(cfg, physics=dataclasses.replace(cfg.physics, lambda_transport=weight))
 
 
 def resolve_schedule(cfg, saved=None):

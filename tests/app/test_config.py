@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from velogauss.config import Config, ModelConfig, load_config, resolve_schedule, to_toml
+from velogauss.config import Config, ModelConfig, load_config, resolve_schedule, resolve_transport, to_toml
 from velogauss_core.motion import MotionConfig, MotionSizes
 
 
@@ -56,6 +56,20 @@ def test_a_resumed_run_keeps_its_schedule():
     cfg = resolve_schedule(grown, saved)
     assert cfg.train.iterations == 6000
     assert _schedule(cfg) == (100, 600, 600, 100, 1000, 50, 500, 250)
+
+
+@pytest.mark.parametrize("patterns, weight", [("harmonic", 0.0), ("rigid", 1e-3), ("mlp", 1e-3)])
+def test_auto_transport_weight_is_off_only_with_oscillating_patterns(patterns, weight):
+    assert load_config().physics.lambda_transport == "auto"
+    assert resolve_transport(load_config(), patterns).physics.lambda_transport == weight
+
+
+def test_a_transport_weight_set_to_a_number_is_kept():
+    cfg = load_config(None, ["physics.lambda_transport=1e-3"])
+    assert resolve_transport(cfg, "harmonic").physics.lambda_transport == 1e-3
+    # A resumed run keeps the weight it started with, whatever the profile says now.
+    saved = resolve_transport(load_config(), "rigid")
+    assert resolve_transport(load_config(), "harmonic", saved).physics.lambda_transport == 1e-3
 
 
 def test_bare_word_override_is_a_string():

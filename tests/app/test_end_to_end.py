@@ -88,17 +88,18 @@ def pulse_run(tmp_path_factory):
 
 
 def test_the_periodic_scene_is_learned_and_extrapolated(pulse_run):
-    # pulse declares `oscillation`, so its patterns are oscillators (VG-COEF-HARM). Seeds 0-2
-    # of this set-up: velocity error 0.17-0.21 observed and 0.19-0.23 future, extrapolation
-    # 4.8-6.8 dB above holding still (the target for the periodic scene is 3 dB).
-    # With the time network (model.patterns = mlp, seed 0) the error was 1.01 / 0.99, no
-    # motion at all, and extrapolation 0.2 dB below holding still.
+    # pulse declares `oscillation`, so its patterns are oscillators (VG-COEF-HARM), and the
+    # transport residual is off ("auto"). Seeds 0-2 of this set-up: velocity error 0.045-0.052
+    # observed and 0.096-0.097 future, extrapolation 7.0-7.2 dB above holding still (the
+    # issue's target for the periodic scene is 3 dB). With the residual on they were
+    # 0.17-0.21 / 0.19-0.23 and 4.8-6.8 dB, which these bounds fail; with the time network
+    # (model.patterns = mlp, seed 0) 1.01 / 0.99, no motion at all, and 0.2 dB below.
     observed, future = _velocity_errors(pulse_run)
-    assert observed < 0.30
-    assert future < 0.33
+    assert observed < 0.08
+    assert future < 0.14
     scene, truth, model = pulse_run
     result = evaluate_model(model, scene, splits=("extrapolation",), ground_truth=truth)
-    assert result["splits"]["extrapolation"]["mean"]["psnr"] > result["freeze_baseline"]["mean"]["psnr"] + 3.0
+    assert result["splits"]["extrapolation"]["mean"]["psnr"] > result["freeze_baseline"]["mean"]["psnr"] + 5.0
 
 
 def test_cli_train_eval_render_export(tmp_path):

@@ -67,6 +67,7 @@ VARIANTS = {
     "a-phys10": ["physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
     "a-phys100": ["physics.lambda_transport=1e-1", "physics.lambda_div=1e-1"],
     "a-no-transport": ["physics.lambda_transport=0"],
+    "a-transport": ["physics.lambda_transport=1e-3"],  # where "auto" turns it off (pulse)
     "b-phys10": ["model.scheme=adf-step", "physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
     "deform-only": ["model.ablation=deform-only"],
     "b-carry": ["model.scheme=adf-step", "train.lambda_carry=1.0"],

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from velogauss.config import check_resume_config, config_from_dict, resolve_schedule, to_toml
+from velogauss.config import check_resume_config, config_from_dict, resolve_schedule, resolve_transport, to_toml
 from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
@@ -89,9 +89,10 @@ def prepare(cfg, data, run_dir, resume=False):
 
     Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `loop.step(it)`
     and `loop.maintain(it + 1)` then run iteration `it` (the contention benchmark times them).
-    The schedule's "auto" keys are resolved here (`resolve_schedule`): for a new run from
-    `train.iterations`, on resume to the run's own values; `loop.cfg` and config.toml hold
-    the numbers used.
+    The schedule's "auto" keys and the transport weight's are resolved here
+    (`resolve_schedule`, `resolve_transport`): for a new run from `train.iterations` and the
+    scene profile's patterns, on resume to the run's own values; `loop.cfg` and config.toml
+    hold the numbers used.
     """
     apply_threads(cfg.train.threads)
     check_trainable_size(data)
@@ -102,9 +103,9 @@ def prepare(cfg, data, run_dir, resume=False):
     if resume:
         payload = load_checkpoint(run_dir, device)
         saved = config_from_dict(payload["config"], str(checkpoint_path(run_dir)))
-        cfg = resolve_schedule(cfg, saved)
-        check_resume_config(saved, cfg)
         profile = profile_from_dict(payload["profile"])
+        cfg = resolve_transport(resolve_schedule(cfg, saved), profile.pattern_form, saved)
+        check_resume_config(saved, cfg)
         model = model_from_state(cfg, profile, payload["model"])
         model.load_state_dict(payload["model"])
         model.to(device)
@@ -121,6 +122,7 @@ def prepare(cfg, data, run_dir, resume=False):
         rng = np.random.default_rng(cfg.train.seed)
         torch.manual_seed(cfg.train.seed)
         profile = scene_profile(cfg, data.metadata)
+        cfg = resolve_transport(cfg, profile.pattern_form)
         points, colors = _initial_points(data, cfg.model.init_points, rng)
         model = build_model(cfg, profile, points, colors, rng).to(device)
         start_frequency(model, data.train, data.max_time)
