@@ -247,8 +247,9 @@ TRANSPORT_WEIGHT = 1e-3
 
 def resolve_transport(cfg, pattern_form, saved=None):
     """`cfg` with an "auto" `physics.lambda_transport` replaced: by the value `saved` holds (the
-    run being resumed), else by 0 when the motion patterns oscillate (`pattern_form`
-    "harmonic", VG-COEF-HARM) and TRANSPORT_WEIGHT otherwise. A number is kept.
+    run being resumed; `pattern_form` is then not read), else by 0 when the motion patterns
+    oscillate (`pattern_form` "harmonic", VG-COEF-HARM) and TRANSPORT_WEIGHT otherwise. A
+    number is kept.
 
     Why 0 there: the oscillating patterns continue the motion past the window by themselves,
     and their acceleration (VG-ACC-HARM) lags the velocity while it trains, so the residual
@@ -263,6 +264,13 @@ def resolve_transport(cfg, pattern_form, saved=None):
     else:
         weight = 0.0 if pattern_form == "harmonic" else TRANSPORT_WEIGHT
     return dataclasses.replace(cfg, physics=dataclasses.replace(cfg.physics, lambda_transport=weight))
+
+
+def resolve_from_run(cfg, saved):
+    """`cfg` with its "auto" keys (the schedule's and the transport weight) set to the numbers
+    of `saved`, the config of an existing run: what `cfg` means for that run when `--resume`
+    or a sweep continues it."""
+    return resolve_transport(resolve_schedule(cfg, saved), None, saved)
 
 
 def resolve_schedule(cfg, saved=None):

@@ -4,7 +4,8 @@ import dataclasses
 
 import pytest
 
-from velogauss.config import Config, ModelConfig, load_config, resolve_schedule, resolve_transport, to_toml
+from velogauss.config import (Config, ModelConfig, load_config, resolve_from_run, resolve_schedule, resolve_transport,
+                              to_toml)
 from velogauss_core.motion import MotionConfig, MotionSizes
 
 
@@ -70,6 +71,12 @@ def test_a_transport_weight_set_to_a_number_is_kept():
     # A resumed run keeps the weight it started with, whatever the profile says now.
     saved = resolve_transport(load_config(), "rigid")
     assert resolve_transport(load_config(), "harmonic", saved).physics.lambda_transport == 1e-3
+
+
+def test_an_existing_run_gives_its_numbers_to_every_auto_key():
+    saved = resolve_transport(resolve_schedule(load_config(None, ["train.iterations=1500"])), "harmonic")
+    cfg = resolve_from_run(load_config(None, ["train.iterations=1500"]), saved)
+    assert cfg == saved and cfg.physics.lambda_transport == 0.0 and cfg.train.warmup == 100
 
 
 def test_bare_word_override_is_a_string():

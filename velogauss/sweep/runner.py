@@ -5,7 +5,8 @@
 1. Generates each catalogue scene once into `OUT/data/<scene>/` (into a temporary folder that
    is renamed when complete, so a killed sweep never leaves a half-written scene behind).
 2. Plans every point (`plan_point`): its run folder `OUT/<name>/` is *skipped* when it holds
-   `metrics.json` and a `config.toml` equal to the point's config; *resumed* from its latest
+   `metrics.json` and a `config.toml` equal to the point's config (its "auto" keys as the run
+   resolved them, `velogauss.config.resolve_from_run`); *resumed* from its latest
    checkpoint when the config is equal but training or evaluation did not finish; *failed*
    (not touched) when it holds a different config, so nobody's results are overwritten;
    otherwise trained from the start. A config that does not resolve (a bad `set` value)
@@ -56,7 +57,7 @@ def point_config(point, config_path, data_dir):
 
 def plan_point(point, config_path, out_dir):
     """Decide whether `point` is skipped, resumed, trained or failed (see the module docstring)."""
-    from velogauss.config import load_config
+    from velogauss.config import load_config, resolve_from_run
 
     run_dir = Path(out_dir) / point.name
     data_dir = Path(point.data) if point.data else Path(out_dir) / "data" / point.scene
@@ -73,7 +74,8 @@ def plan_point(point, config_path, out_dir):
         previous = load_config(saved)
     except ValueError as err:
         previous = err
-    if previous != cfg:
+    # A run folder records the numbers its "auto" keys resolved to, and a resumed run uses them.
+    if isinstance(previous, ValueError) or resolve_from_run(previous, previous) != resolve_from_run(cfg, previous):
         return Plan(point, run_dir, data_dir, "fail",
                     f"{saved}: the run folder holds a different config; move it away or change `out` "
                     "(it was left untouched)")

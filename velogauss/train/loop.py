@@ -27,7 +27,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from velogauss.config import check_resume_config, config_from_dict, resolve_schedule, resolve_transport, to_toml
+from velogauss.config import (check_resume_config, config_from_dict, resolve_from_run, resolve_schedule,
+                              resolve_transport, to_toml)
 from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
@@ -103,9 +104,9 @@ def prepare(cfg, data, run_dir, resume=False):
     if resume:
         payload = load_checkpoint(run_dir, device)
         saved = config_from_dict(payload["config"], str(checkpoint_path(run_dir)))
-        profile = profile_from_dict(payload["profile"])
-        cfg = resolve_transport(resolve_schedule(cfg, saved), profile.pattern_form, saved)
+        cfg = resolve_from_run(cfg, saved)
         check_resume_config(saved, cfg)
+        profile = profile_from_dict(payload["profile"])
         model = model_from_state(cfg, profile, payload["model"])
         model.load_state_dict(payload["model"])
         model.to(device)
