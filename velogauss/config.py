@@ -10,6 +10,10 @@ and is checked before any training. Unknown sections or keys and values of the w
 out of range raise ValueError naming the key and where the value came from (the file, `--set`
 or the flag). `to_toml(cfg)` writes a config back (tomli-w); `velogauss train` saves it as
 `RUN_DIR/config.toml`, which is what `eval`, `render`, `export` and `--resume` read again.
+Keys whose default is "auto" and that depend on the run (the schedule's, scaled to
+`train.iterations`, and `physics.lambda_transport`, set by the scene's motion patterns) are
+resolved when a run starts (`resolve_schedule`, `resolve_transport`); its config.toml holds
+the numbers, and a resumed run keeps them (`resolve_from_run`).
 
 The lists of choices are defined once, as `Literal` types (`Ablation`, `Integrator`,
 `Effect`, `Scheme` in velogauss_core.motion; `Placement` here); the command line shows them
