@@ -111,8 +111,11 @@ def _model(tiny_scene, overrides=()):
     return cfg, build_model(cfg, profile, tiny_scene.points, tiny_scene.point_colors, np.random.default_rng(0))
 
 
-def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene):
+def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
+    # On CUDA too: the split noise comes from the CPU generator the loop seeds (the first
+    # GPU run found it drawn on the CPU and added to CUDA means).
     cfg, model = _model(tiny_scene)
+    model.to(device)
     opt = make_optimizer(model, cfg.train, extent=4.0)
     g = model.gaussians
     n = len(g)
@@ -122,7 +125,7 @@ def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene):
     opt.step()
     old_means = g.means.detach().clone()
     old_moment = opt.state[g.means]["exp_avg"].clone()
-    stats = DensityStats(n)
+    stats = DensityStats(n, device)
     stats.grad[:5] = 1.0  # five hot Gaussians
     stats.count[:] = 1.0
     with torch.no_grad():

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from tests.fast.render_cases import RENDER_GRAD_KEYS, assert_close, boundary_band, random_scene, scene_to_torch
+from tests.fast.render_cases import (RENDER_GRAD_KEYS, assert_close, boundary_band, random_scene, scene_to_torch,
+                                     to_numpy)
 from velogauss_fast.backends import gsplat_available
 from velogauss_fast.raster import rasterize
 
@@ -78,10 +79,10 @@ def test_fast_vs_gsplat(seed):
     image, alpha, meta, grads = results["gsplat"]
     image_t, alpha_t, meta_t, grads_t = results["torch"]
     assert meta["n_pairs"] is None and meta_t["n_pairs"] > 0  # gsplat really ran
-    assert_close(image, image_t.cpu().numpy(), RTOL_IMAGE, name="image", mask=keep)
-    assert_close(alpha, alpha_t.cpu().numpy(), RTOL_IMAGE, name="alpha", mask=keep)
+    assert_close(image, to_numpy(image_t), RTOL_IMAGE, name="image", mask=keep)
+    assert_close(alpha, to_numpy(alpha_t), RTOL_IMAGE, name="alpha", mask=keep)
     for key, g, g_t in zip(RENDER_GRAD_KEYS, grads, grads_t):
-        assert_close(g, g_t.cpu().numpy(), RTOL_GRAD, name=f"gradient of {key}", floor=1.0)
+        assert_close(g, to_numpy(g_t), RTOL_GRAD, name=f"gradient of {key}", floor=1.0)
 
 
 @pytest.mark.spec("VG-RENDER")

@@ -57,16 +57,26 @@ def peak_above_mib(device, baseline):
     return (torch.cuda.max_memory_allocated() - baseline[1]) / 2**20
 
 
-def machine():
-    """One line naming the CPU, its cores, torch (and its threads) and Python."""
+def machine(device="cpu"):
+    """One line naming the CPU, its cores, torch (and its threads) and Python, and the GPU
+    with its driver's CUDA version when `device` is a CUDA device."""
     cpu = "unknown CPU"
     try:
         with open("/proc/cpuinfo") as f:
             cpu = re.search(r"^model name\s*:\s*(.+)$", f.read(), re.M).group(1).strip()
     except (OSError, AttributeError):
         pass
-    return (f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} "
+    line = (f"{cpu}, {os.cpu_count()} cores, torch {torch.__version__} "
             f"({torch.get_num_threads()} threads), Python {platform.python_version()}")
+    if str(device).startswith("cuda"):
+        line += f"; GPU {torch.cuda.get_device_name(device)} (CUDA {torch.version.cuda})"
+    return line
+
+
+def device_section(section, device):
+    """The results section of a benchmark run on `device`: `section` itself on the CPU, so
+    that a CUDA run adds its own section ("## Rasterizer, CUDA") instead of replacing it."""
+    return section if device == "cpu" else f"{section}, {str(device).split(':')[0].upper()}"
 
 
 def regenerate_command(command, *options, quick=False, device="cpu", threads=0):

@@ -36,7 +36,8 @@ import numpy as np
 import torch
 from torch.func import jacrev, vmap
 
-from velogauss.bench.harness import machine, peak_above_mib, regenerate_command, reset_peak_memory, timed_passes, write_section
+from velogauss.bench.harness import (device_section, machine, peak_above_mib, regenerate_command,
+                                      reset_peak_memory, timed_passes, write_section)
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
@@ -250,7 +251,7 @@ def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo
                              results[f"residuals-jacrev-{kind}"], base))
     command = regenerate_command(COMMAND, quick=quick, device=device, threads=threads)
     text = "\n\n".join([
-        SECTION,
+        device_section(SECTION, device),
         f"{device.upper()}, float32, `MotionConfig()` defaults, parameters "
         f"`init_motion_params(default_rng(0), MotionConfig())` shifted by N(0, 0.1^2) (so that "
         f"velocities and residuals are not identically 0). Trajectory: `physics_code` + "
@@ -263,11 +264,11 @@ def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo
         f"them (freed heap memory trimmed first; on CUDA the allocator's peak).",
         f"Forward-mode vs jacrev, max abs difference over r and div: {diff32:.2e} in float32 "
         f"(max |r| = {r32:.2e}, max |div| = {d32:.2e}), {diff64:.2e} in float64.",
-        f"Machine: {machine()}.",
+        f"Machine: {machine(device)}.",
         f"Regenerate: `{command}`",
         "\n".join(rows),
     ])
-    write_section(str(out), SECTION, text)
+    write_section(str(out), device_section(SECTION, device), text)
     return results
 
 

@@ -42,8 +42,8 @@ from dataclasses import dataclass
 
 import torch
 
-from velogauss.bench.harness import (machine, peak_above_mib, regenerate_command, reset_peak_memory, status_kib,
-                                      timed_passes, write_section)
+from velogauss.bench.harness import (device_section, machine, peak_above_mib, regenerate_command,
+                                      reset_peak_memory, status_kib, timed_passes, write_section)
 from velogauss_fast.backends import gsplat_available
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
@@ -387,7 +387,7 @@ def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=M
             else:
                 results.append(_merge(runs[m]))
     text = "\n\n".join([
-        SECTION,
+        device_section(SECTION, device),
         f"Forward + backward (loss = <image, v> + <alpha, v'>, gradients of means, quats, scales, "
         f"opacities, colours) of one {device.upper()} float32 render. Each workload runs in {rounds} "
         f"rounds of fresh processes, one per method in turn (dense and reference in the first only), "
@@ -400,11 +400,11 @@ def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=M
         f"screen-space standard deviations 0.2-2 px per axis, opacities 0.1-0.9). Ratios are to "
         f"the default backend (what `rasterize(backend=\"auto\")` picks here: "
         f"{default_method(device)}).",
-        f"Machine: {machine()}.",
+        f"Machine: {machine(device)}.",
         f"Regenerate: `{_command(workloads, methods, device, threads, rounds)}`",
         _table(results, workloads, methods, device),
     ])
-    write_section(out_path, SECTION, text)
+    write_section(out_path, device_section(SECTION, device), text)
     return results
 
 

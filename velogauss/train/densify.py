@@ -124,7 +124,8 @@ def _split_children(g, split, generator):
     tensors = g.tensors()
     parents = {name: t[split].repeat_interleave(_SPLIT_CHILDREN, dim=0) for name, t in tensors.items()}
     scales = torch.exp(parents["log_scales"])
-    noise = torch.randn(scales.shape, generator=generator, dtype=scales.dtype)
+    # The generator lives on the CPU (torch_generator), so a CUDA run draws the same noise.
+    noise = torch.randn(scales.shape, generator=generator, dtype=scales.dtype).to(scales.device)
     R = quat_to_rotmat(parents["quats"])
     parents["means"] = parents["means"] + (R @ (scales * noise)[..., None])[..., 0]
     parents["log_scales"] = torch.log(scales / _SPLIT_SCALE_DIVISOR)
