@@ -283,12 +283,13 @@ def resolve_schedule(cfg, saved=None):
     times `cfg.train.iterations / SCHEDULE_ITERATIONS`, rounded, intervals to at least 1.
     Keys set to a number are kept as they are."""
     changes = {}
+    saved = resolve_schedule(saved) if saved is not None else None
     for name, value in SCHEDULE.items():
         section, key = name.split(".")
         if getattr(getattr(cfg, section), key) != "auto":
             continue
         if saved is not None:
-            value = getattr(getattr(resolve_schedule(saved), section), key)
+            value = getattr(getattr(saved, section), key)
         else:
             value = round(value * cfg.train.iterations / SCHEDULE_ITERATIONS)
             value = max(1, value) if name in _PERIODS else value
