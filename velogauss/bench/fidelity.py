@@ -77,6 +77,7 @@ VARIANTS = {
     "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
     "a-lr-acc": ["train.lr_acc=0.005"],
     "a-lr-acc-hi": ["train.lr_acc=0.15"],
+    "a-budget30k": ["densify.max_gaussians=30000"],
     "a-rigid": ["model.acceleration=rigid"],
     "a-rigid-near": ["model.acceleration=rigid", "physics.placement=gaussians"],
     "a-mlp": ["model.patterns=mlp"],
