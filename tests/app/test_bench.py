@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from velogauss.bench import motion, raster
+from velogauss.bench.harness import device_section, write_section
 
 
 @pytest.fixture
@@ -184,3 +185,18 @@ def test_step_ratio_quick(tmp_path):
     # terms ~1e-3 that cancel to ~1e-12 at the start of training (rounding 1e-3 x 1e-16).
     for name, (diff, scale) in result["agreement"].items():
         assert diff <= 1e-12 * scale + 1e-18, (name, diff, scale)
+
+
+def test_a_cuda_run_adds_its_own_section_and_keeps_the_cpu_one(tmp_path):
+    out = tmp_path / "R.md"
+    write_section(out, device_section("## Rasterizer", "cpu"), "## Rasterizer\n\ncpu numbers")
+    cuda = device_section("## Rasterizer", "cuda:1")
+    assert cuda == "## Rasterizer, CUDA"
+    write_section(out, cuda, f"{cuda}\n\ncuda numbers")
+    text = out.read_text()
+    assert "cpu numbers" in text and "cuda numbers" in text
+    assert text.index("## Rasterizer\n") < text.index("## Rasterizer, CUDA\n")
+    # A new CPU run replaces its own section only.
+    write_section(out, "## Rasterizer", "## Rasterizer\n\nnew cpu numbers")
+    text = out.read_text()
+    assert "new cpu numbers" in text and "cuda numbers" in text and "\ncpu numbers" not in text
