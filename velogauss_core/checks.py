@@ -56,6 +56,14 @@ def check_weight(name: str, value):
     return value
 
 
+def check_variance(name: str, value):
+    """Raise ValueError naming `name` unless `value` is a finite real variance >= 0; return it."""
+    check_scalar(name, value)
+    if value < 0:
+        raise ValueError(f"{name}: expected a variance >= 0, got {value!r}")
+    return value
+
+
 def check_image_size(shape: tuple, min_size: int, why: str) -> None:
     """Raise ValueError naming `pred` when an image of `shape` (H, W, 3) is smaller than
     `min_size` x `min_size` pixels, which `why` needs."""

@@ -28,6 +28,16 @@ FRUSTUM_GUARD = 0.3
 # makes each splat at least about one pixel wide, so a Gaussian thinner than a pixel
 # neither aliases nor yields a singular conic. 3DGS and gsplat use 0.3.
 EPS2D = 0.3
+# The dilation of the "antialiased" mode (VG-RENDER), Mip-Splatting's 2D Mip filter: about
+# the variance of a one-pixel box filter (1/12), the filter a rendered pixel should apply.
+# With EPS2D instead, the learned rate of strain of grow and shear stayed 3-4 % too large
+# (benchmarks/FIDELITY.md, section 0); Mip-Splatting uses 0.1.
+MIP_FILTER_VARIANCE = 0.1
+# Floor under det(cov2d before EPS2D) / det(cov2d), the square of the antialiased mode's
+# opacity factor (VG-PROJ 5, VG-RENDER): at the floor the factor is 1e-6, so the splat's
+# alpha is below ALPHA_MIN whatever its opacity and no pixel changes; the floor keeps the
+# square root's derivative finite for a splat that is a line or a point on screen.
+ANTIALIAS_DET_RATIO_FLOOR = 1e-12
 # Screen-space extent: the splat's support is cut at this many standard deviations along
 # its major axis (3 sigma holds 98.9% of a 2D Gaussian's mass). Same as 3DGS.
 GAUSSIAN_EXTENT_SIGMA = 3.0

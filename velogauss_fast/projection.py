@@ -7,6 +7,7 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_core.constants import (
+    ANTIALIAS_DET_RATIO_FLOOR,
     EIGEN_DISCRIMINANT_FLOOR,
     EPS2D,
     FAR_PLANE,
@@ -14,7 +15,7 @@ from velogauss_core.constants import (
     GAUSSIAN_EXTENT_SIGMA,
     NEAR_PLANE,
 )
-from velogauss_core.checks import check_size
+from velogauss_core.checks import check_size, check_variance
 
 # Radii are capped here before the integer cast: a splat wider than this covers any
 # image we can allocate, and the cap keeps absurd covariances (float32 overflow in
@@ -22,13 +23,16 @@ from velogauss_core.checks import check_size
 _RADIUS_CAP = float(2**40)
 
 
-def project_gaussians(means, Sigma, viewmat, K, width, height):
+def project_gaussians(means, Sigma, viewmat, K, width, height, eps2d=EPS2D):
     """Project Gaussians to 2D: means, depths, covariances, conics, radii, validity (VG-PROJ).
 
     means: (N, 3) world; Sigma: (N, 3, 3) world covariances; viewmat: (4, 4) world-to-camera
-    (OpenCV axes); K: (3, 3) intrinsics in pixels; width, height: image size in pixels.
+    (OpenCV axes); K: (3, 3) intrinsics in pixels; width, height: image size in pixels;
+    eps2d: the dilation (px^2) added to the 2D covariance (velogauss_core.rendering.dilation).
     Returns a dict of mean2d (N, 2) px, depth (N,), cov2d (N, 2, 2) px^2, conic (N, 3)
-    (a, b, c of the inverse covariance), radius (N,) int64 px, valid (N,) bool.
+    (a, b, c of the inverse covariance), compensation (N,) in (0, 1] (the antialiased
+    mode's opacity factor, sqrt of det before eps2d over det after), radius (N,) int64 px,
+    valid (N,) bool.
 
     Culled (valid = False): depth outside [NEAR_PLANE, FAR_PLANE], det(cov2d) <= 0, or the
     box [u +- r] x [v +- r] disjoint from [0, width] x [0, height]. Culled entries stay
@@ -44,6 +48,7 @@ def project_gaussians(means, Sigma, viewmat, K, width, height):
     check_array("K", K, (3, 3))
     check_size("width", width)
     check_size("height", height)
+    check_variance("eps2d", eps2d)
 
     Wr = viewmat[:3, :3]
     p = means @ Wr.T + viewmat[:3, 3]  # [N, 3] camera space
@@ -71,14 +76,16 @@ def project_gaussians(means, Sigma, viewmat, K, width, height):
         [fx / z, zeros, -fx * tx / (z * z), zeros, fy / z, -fy * ty / (z * z)], dim=-1
     ).reshape(n, 2, 3)
     JW = J @ Wr
-    cov2d = JW @ Sigma @ JW.transpose(-1, -2)
-    cov2d = cov2d + EPS2D * torch.eye(2, dtype=cov2d.dtype, device=cov2d.device)
+    raw = JW @ Sigma @ JW.transpose(-1, -2)
+    cov2d = raw + eps2d * torch.eye(2, dtype=raw.dtype, device=raw.device)
 
     s00, s01, s11 = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
     det = s00 * s11 - s01 * s01
     valid = valid & (det > 0)
     det_safe = torch.where(det > 0, det, torch.ones_like(det))
     conic = torch.stack([s11, -s01, s00], dim=-1) / det_safe[:, None]
+    det_raw = raw[:, 0, 0] * raw[:, 1, 1] - raw[:, 0, 1] * raw[:, 0, 1]
+    compensation = torch.sqrt(torch.clamp(det_raw / det_safe, min=ANTIALIAS_DET_RATIO_FLOOR))
 
     radius = _radius(cov2d.detach())
     rf = radius.to(u.dtype)
@@ -90,6 +97,7 @@ def project_gaussians(means, Sigma, viewmat, K, width, height):
         "depth": depth,
         "cov2d": cov2d,
         "conic": conic,
+        "compensation": compensation,
         "radius": radius,
         "valid": valid,
     }

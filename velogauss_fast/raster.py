@@ -39,6 +39,7 @@ from torch import Tensor
 
 from velogauss_core.checks import check_degree, check_size
 from velogauss_core.constants import TRANSMITTANCE_MIN
+from velogauss_core.rendering import RasterizeMode, check_mode, dilation, splat_opacities
 from velogauss_fast.backends import gsplat_available, numba_available
 from velogauss_fast.checks import check_array, check_finite
 from velogauss_fast.composite import Composite, alpha_from_offsets, composite_autograd
@@ -102,6 +103,7 @@ def rasterize(
     background: Tensor | None = None,  # [3]
     sh_degree: int | None = None,
     backend: Backend = "auto",
+    mode: RasterizeMode = "classic",
 ) -> tuple[Tensor, Tensor, dict]:
     """Render one image of N Gaussians, gsplat-style (VG-RENDER).
 
@@ -114,6 +116,9 @@ def rasterize(
     velogauss_fast.backends.gsplat_backend; ValueError where CUDA or gsplat is missing) or
     "auto": gsplat when CUDA and gsplat are available, else numba for CPU tensors when numba
     is installed, else torch.
+    mode: "classic" (3DGS: dilation EPS2D) or "antialiased" (Mip-Splatting's 2D filter:
+    dilation MIP_FILTER_VARIANCE, each splat's opacity times VG-PROJ's compensation;
+    velogauss_core.rendering), on every backend.
     Returns image (H, W, 3), alpha (H, W, 1) = 1 - T, and meta: the VG-PROJ outputs
     (mean2d, depth, cov2d, conic, radius, valid), "colors" (N, 3) the RGB used, and
     "n_pairs" the number of (Gaussian, pixel) pairs composited. meta["mean2d"] is part of
@@ -124,6 +129,7 @@ def rasterize(
     """
     if backend not in _BACKENDS:
         raise ValueError(f"backend: expected one of {_BACKENDS}, got {backend!r}")
+    check_mode(mode)
     check_array("means", means, (None, 3))
     n = means.shape[0]
     check_array("quats", quats, (n, 4))
@@ -166,20 +172,21 @@ def rasterize(
         from velogauss_fast.backends.gsplat_backend import rasterize_gsplat
 
         return rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height,
-                                background, sh_degree)
+                                background, sh_degree, mode)
     return render_with_composite(means, quats, scales, opacities, colors, viewmat, K, width, height, background,
-                                 sh_degree, COMPOSITES[backend])
+                                 sh_degree, COMPOSITES[backend], mode)
 
 
 def render_with_composite(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree,
-                          composite):
+                          composite, mode="classic"):
     """`rasterize` on validated input with one of the COMPOSITES (the benchmark times each
     through this one pipeline)."""
-    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height)
+    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height, dilation(mode))
     if sh_degree is None:
         rgb = colors
     else:
         rgb = sh_to_color(colors, viewing_directions(means, viewmat), sh_degree)
+    opacities = splat_opacities(opacities, proj["compensation"], mode)
     spans = row_spans(proj["mean2d"], proj["conic"], opacities, proj["radius"], proj["depth"], proj["valid"],
                       width, height)
     image, T = composite(proj["mean2d"], proj["conic"], opacities, rgb, background, spans)

@@ -7,9 +7,10 @@ import autograd.numpy as np
 import numpy as onp
 from autograd.tracer import getval
 
-from velogauss_core.checks import check_size
+from velogauss_core.checks import check_size, check_variance
 from velogauss_ref.checks import check_array
 from velogauss_core.constants import (
+    ANTIALIAS_DET_RATIO_FLOOR,
     EIGEN_DISCRIMINANT_FLOOR,
     EPS2D,
     FAR_PLANE,
@@ -19,14 +20,17 @@ from velogauss_core.constants import (
 )
 
 
-def project_gaussians(means, Sigma, viewmat, K, width, height):
+def project_gaussians(means, Sigma, viewmat, K, width, height, eps2d=EPS2D):
     """Project Gaussians to 2D: mean2d, depth, cov2d, conic, radius, valid (VG-PROJ).
 
     means: (N, 3) world mu; Sigma: (N, 3, 3) world covariances; viewmat: (4, 4)
     world-to-camera (OpenCV axes); K: (3, 3) intrinsics in pixels; width, height: image
-    size in pixels (positive ints). Returns a dict of
+    size in pixels (positive ints); eps2d: the dilation in px^2 (EPS2D, or the antialiased
+    mode's MIP_FILTER_VARIANCE). Returns a dict of
       mean2d (N, 2) pixel coordinates (u, v), depth (N,) camera z,
-      cov2d (N, 2, 2) px^2 (dilated by EPS2D), conic (N, 3) = (a, b, c) of cov2d^-1,
+      cov2d (N, 2, 2) px^2 (dilated by eps2d), conic (N, 3) = (a, b, c) of cov2d^-1,
+      compensation (N,) in (0, 1], the antialiased mode's opacity factor
+      sqrt(det(cov2d - eps2d I) / det(cov2d)),
       radius (N,) int64 px, valid (N,) bool.
     Culled (valid = False): depth outside [NEAR_PLANE, FAR_PLANE], det(cov2d) <= 0, or the
     box [u - r, u + r] x [v - r, v + r] disjoint from [0, width] x [0, height]. Culled
@@ -41,6 +45,7 @@ def project_gaussians(means, Sigma, viewmat, K, width, height):
     check_array("K", K, (3, 3))
     check_size("width", width)
     check_size("height", height)
+    check_variance("eps2d", eps2d)
 
     # 1. Camera space.
     W = viewmat[:3, :3]
@@ -61,14 +66,18 @@ def project_gaussians(means, Sigma, viewmat, K, width, height):
 
     # 5. 2D covariance, dilated.
     JW = np.matmul(J, W)
-    cov2d = np.matmul(np.matmul(JW, Sigma), np.swapaxes(JW, -1, -2)) + EPS2D * np.eye(2)
+    raw = np.matmul(np.matmul(JW, Sigma), np.swapaxes(JW, -1, -2))
+    cov2d = raw + eps2d * np.eye(2)
 
-    # 6. Conic (inverse of cov2d).
+    # 6. Conic (inverse of cov2d), and the antialiased mode's opacity factor: the splat's
+    # integral before the dilation over its integral after.
     s00, s01, s11 = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
     det = s00 * s11 - s01 * s01
     valid = valid & (det > 0)
     det_safe = np.where(det > 0, det, 1.0)
     conic = np.stack([s11, -s01, s00], axis=-1) / det_safe[:, None]
+    det_raw = raw[:, 0, 0] * raw[:, 1, 1] - raw[:, 0, 1] * raw[:, 0, 1]
+    compensation = np.sqrt(np.maximum(det_raw / det_safe, ANTIALIAS_DET_RATIO_FLOOR))
 
     # 7. Extent and 8. off-screen culling.
     radius = _radius(getval(cov2d))
@@ -80,6 +89,7 @@ def project_gaussians(means, Sigma, viewmat, K, width, height):
         "depth": depth,
         "cov2d": cov2d,
         "conic": conic,
+        "compensation": compensation,
         "radius": radius,
         "valid": onp.asarray(valid),
     }

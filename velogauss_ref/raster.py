@@ -13,6 +13,7 @@ from velogauss_ref.checks import check_array
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 from velogauss_ref.covariance import covariance_3d
 from velogauss_core.checks import check_degree, check_size
+from velogauss_core.rendering import check_mode, dilation, splat_opacities
 from velogauss_ref.projection import project_gaussians
 from velogauss_ref.sh import sh_to_color, viewing_directions
 
@@ -68,14 +69,16 @@ def blend(colors, alphas, background):
 
 
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width, height,
-              background=None, sh_degree=None):
+              background=None, sh_degree=None, mode="classic"):
     """Render one image of N Gaussians by a literal per-pixel loop (VG-RENDER).
 
     means (N, 3) world; quats (N, 4) (w, x, y, z); scales (N, 3) standard deviations;
     opacities (N,) in [0, 1]; colors (N, 3) RGB, or (N, K, 3) SH coefficients with
     K >= (sh_degree + 1)^2 when sh_degree in {0, 1, 2, 3} is given; viewmat (4, 4)
     world-to-camera (OpenCV axes); K (3, 3) intrinsics; width, height positive ints;
-    background (3,) (default black).
+    background (3,) (default black); mode "classic" (dilation EPS2D) or "antialiased"
+    (dilation MIP_FILTER_VARIANCE, each splat's opacity times VG-PROJ's compensation;
+    velogauss_core.rendering).
     Returns image (H, W, 3), alpha (H, W, 1) = 1 - T, and meta: the VG-PROJ outputs
     (mean2d, depth, cov2d, conic, radius, valid), "colors" (N, 3) the RGB used and
     "n_pairs" the number of (valid Gaussian, pixel) pairs whose box holds the pixel centre.
@@ -105,12 +108,14 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width, height
     if background is None:
         background = np.zeros(3)
     check_array("background", background, (3,))
+    check_mode(mode)
 
-    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height)
+    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height, dilation(mode))
     if sh_degree is None:
         rgb = colors
     else:
         rgb = sh_to_color(colors, viewing_directions(means, viewmat), sh_degree)
+    opacities = splat_opacities(opacities, proj["compensation"], mode)
 
     valid_ids = onp.flatnonzero(proj["valid"])
     depth_order = valid_ids[onp.argsort(getval(proj["depth"])[valid_ids], kind="stable")]

@@ -161,3 +161,31 @@ def test_model_refuses_bad_points_where_they_enter():
     with pytest.raises(ValueError, match="^x: expected shape"):
         model.particle_velocity(x0, x0[:5], 0.2)
     assert torch.isfinite(model.velocity_at(x0, torch.tensor(0.2))).all()  # a finite 0-d tensor time passes
+
+
+@pytest.mark.parametrize("mode", ["classic", "antialiased"])
+def test_the_model_renders_in_its_rasterize_mode(mode):
+    # The mode travels with the Gaussians (gaussians_at's dict), so every caller of
+    # render_gaussians (training, eval, the viewer) renders as the model was trained.
+    from velogauss.data.cameras import Camera, look_at
+    from velogauss_fast.raster import rasterize
+
+    x0, _, _ = _canonical()
+    gaussians = Gaussians.from_points(0.3 * x0.numpy(), None, 0, 0.5)
+    model = VeloGaussModel(gaussians, None, _spec("full", STATIC), rasterize_mode=mode)
+    camera = Camera(look_at((0.0, -3.0, 0.0), (0.0, 0.0, 0.0)), np.array([[20.0, 0, 8], [0, 20.0, 8], [0, 0, 1]]), 16, 16)
+    g = model.gaussians_at(0.0)
+    assert g["rasterize_mode"] == mode
+    image, _, _ = model.render(camera, 0.0, torch.ones(3))
+    args = [g[k] for k in ("means", "quats", "scales", "opacities", "colors")]
+    cam = [torch.tensor(camera.viewmat, dtype=torch.float32), torch.tensor(camera.K, dtype=torch.float32)]
+    for other in ("classic", "antialiased"):
+        expected, _, _ = rasterize(*args, *cam, 16, 16, torch.ones(3), g["sh_degree"], mode=other)
+        assert torch.equal(image, expected) == (other == mode)
+
+
+def test_model_refuses_an_unknown_rasterize_mode():
+    x0, _, _ = _canonical()
+    with pytest.raises(ValueError, match="^mode: "):
+        VeloGaussModel(Gaussians.from_points(x0.numpy(), None, 0, 0.1), None, _spec("full", STATIC),
+                       rasterize_mode="mip")

@@ -88,6 +88,19 @@ def test_a_profile_saved_before_the_rigid_forms_reads_as_polynomial_and_mlp():
     assert restored.acc_form == "poly" and restored.pattern_form == "mlp"
 
 
+@pytest.mark.parametrize("mode", ["classic", "antialiased"])
+def test_the_profile_carries_the_rasterize_mode(mode):
+    assert resolve_profile(("stretch",), True, rasterize_mode=mode).rasterize_mode == mode
+    assert resolve_profile(("stretch",), True).rasterize_mode == "classic"  # the default of the function
+
+
+def test_a_profile_saved_before_the_rasterize_modes_renders_classic():
+    # A checkpoint written before rasterize_mode existed was trained with the classic renderer.
+    saved = dataclasses.asdict(resolve_profile(("stretch",), True, rasterize_mode="antialiased"))
+    del saved["rasterize_mode"]
+    assert profile_from_dict(saved).rasterize_mode == "classic"
+
+
 def test_rigid_is_six_columns_affine_is_twelve():
     assert resolve_profile(("translation", "rotation"), True).n_columns == 6
     assert resolve_profile(("translation", "rotation", "stretch", "shear"), True).n_columns == 12

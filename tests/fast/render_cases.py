@@ -35,6 +35,7 @@ from velogauss_core.constants import (
     TRANSMITTANCE_MIN,
 )
 from velogauss_ref.covariance import covariance_3d
+from velogauss_core.rendering import dilation, splat_opacities
 from velogauss_ref.projection import project_gaussians
 from velogauss_ref.raster import rasterize as ref_rasterize
 
@@ -133,8 +134,9 @@ def boundary_band(scene, delta):
     projected it with a stand-in depth, so where it would land is unknown.
     """
     width, height = scene["width"], scene["height"]
+    mode = scene.get("mode", "classic")
     Sigma = covariance_3d(scene["quats"], scene["scales"])
-    proj = project_gaussians(scene["means"], Sigma, scene["viewmat"], scene["K"], width, height)
+    proj = project_gaussians(scene["means"], Sigma, scene["viewmat"], scene["K"], width, height, dilation(mode))
     depth_doubt, screen_doubt, radius_doubt = projection_doubt(proj, width, height, delta)
     if depth_doubt.any():
         return np.ones((height, width), bool)
@@ -156,7 +158,8 @@ def boundary_band(scene, delta):
     a, bb, c = proj["conic"].T
     sigma = 0.5 * (a * du * du + c * dv * dv) + bb * du * dv
     sigma_terms = 0.5 * (np.abs(a) * du * du + np.abs(c) * dv * dv) + np.abs(bb * du * dv)
-    raw = scene["opacities"] * np.exp(-np.maximum(sigma, 0))
+    opacity = splat_opacities(scene["opacities"], proj["compensation"], mode)
+    raw = opacity * np.exp(-np.maximum(sigma, 0))
     visible = raw >= (1 - delta) * ALPHA_MIN
     near_alpha = (np.abs(raw - ALPHA_MIN) < delta * ALPHA_MIN) | (np.abs(sigma) < delta * sigma_terms)
     geometric = near_edge | (radius_doubt & ring) | (screen_doubt & wide_box)

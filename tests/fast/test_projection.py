@@ -18,10 +18,10 @@ from tests.fast.render_cases import (
 from tests.ref.cameras import in_view, intrinsics, rigid_viewmat, to_world
 from velogauss_fast.projection import project_gaussians
 from velogauss_ref import projection as ref
-from velogauss_core.constants import EPS2D, FAR_PLANE, FRUSTUM_GUARD, NEAR_PLANE
+from velogauss_core.constants import EPS2D, FAR_PLANE, FRUSTUM_GUARD, MIP_FILTER_VARIANCE, NEAR_PLANE
 from velogauss_ref.covariance import covariance_3d
 
-FLOAT_KEYS = ("mean2d", "depth", "cov2d", "conic")
+FLOAT_KEYS = ("mean2d", "depth", "cov2d", "conic", "compensation")
 DTYPES = [torch.float32, torch.float64]
 # Hand-computed expectations in the working dtype: a few roundings of O(1) values.
 ATOL = {torch.float32: 1e-5, torch.float64: 1e-12}
@@ -92,15 +92,19 @@ def test_radius_and_validity_match_the_reference(device, inputs):
 
 @pytest.mark.spec("VG-PROJ")
 @pytest.mark.parametrize("dtype", DTYPES)
-def test_gaussian_on_the_optical_axis(device, dtype):
-    # Isotropic s = 0.2 at z = 2 seen with f = 10: (f s / z)^2 = 1 px^2 plus EPS2D;
-    # lambda_max = 1.3 + sqrt(EIGEN_DISCRIMINANT_FLOOR) = 1.4, radius ceil(3 sqrt(1.4)) = 4.
-    var = 1.0 + EPS2D
+@pytest.mark.parametrize("eps2d", [EPS2D, MIP_FILTER_VARIANCE])
+def test_gaussian_on_the_optical_axis(device, dtype, eps2d):
+    # Isotropic s = 0.2 at z = 2 seen with f = 10: (f s / z)^2 = 1 px^2 plus eps2d;
+    # lambda_max = 1 + eps2d + sqrt(EIGEN_DISCRIMINANT_FLOOR), 1.4 or 1.2: radius
+    # ceil(3 sqrt(lambda_max)) = 4 either way; compensation sqrt(det before / det after the
+    # dilation) = 1 / (1 + eps2d).
+    var = 1.0 + eps2d
     proj = project_gaussians(torch.tensor([[0.0, 0.0, 2.0]], dtype=dtype, device=device),
                              0.04 * torch.eye(3, dtype=dtype, device=device)[None],
                              torch.eye(4, dtype=dtype, device=device),
-                             to_torch(intrinsics(10.0, 10.0, 4.0, 3.0), dtype, device), 8, 6)
-    expected = {"mean2d": [[4.0, 3.0]], "depth": [2.0], "cov2d": [var * np.eye(2)], "conic": [[1 / var, 0.0, 1 / var]]}
+                             to_torch(intrinsics(10.0, 10.0, 4.0, 3.0), dtype, device), 8, 6, eps2d)
+    expected = {"mean2d": [[4.0, 3.0]], "depth": [2.0], "cov2d": [var * np.eye(2)], "conic": [[1 / var, 0.0, 1 / var]],
+                "compensation": [1 / var]}
     for key, value in expected.items():
         assert proj[key].dtype == dtype and proj[key].device.type == device
         np.testing.assert_allclose(proj[key].cpu().numpy(), value, rtol=0, atol=ATOL[dtype], err_msg=key)
@@ -194,6 +198,8 @@ def _args(**changes):
         (_args(K=torch.eye(4)), "K"),
         (_args(width=0), "width"),
         (_args(height=4.0), "height"),
+        (_args(eps2d=-0.1), "eps2d"),
+        (_args(eps2d=float("nan")), "eps2d"),
         (_args(means=np.zeros((2, 3))), "means"),
     ],
 )

@@ -41,6 +41,7 @@ from velogauss_fast.projection import project_gaussians
 from velogauss_fast.raster import blend, rasterize, splat_alpha
 from velogauss_ref import raster as ref
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
+from velogauss_core.rendering import RASTERIZE_MODES
 
 DTYPES = [torch.float32, torch.float64]
 # Band half-widths (relative): float64 renders reproduce the reference to ~1e-15, so 1e-9
@@ -190,13 +191,15 @@ def test_blend_gradcheck(device):
 @st.composite
 def render_scenes(draw, max_n=12, max_size=12):
     """Random scenes (render_cases.random_scene) with a background, all opacity regimes
-    (faint to opaque, so ALPHA_MAX and the early stop occur) and RGB or SH colours."""
+    (faint to opaque, so ALPHA_MAX and the early stop occur), RGB or SH colours, and
+    either rasterize mode."""
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     opacity = draw(st.sampled_from([(0.05, 0.6), (0.3, 1.0), (0.8, 1.0)]))
     sh_degree = draw(st.sampled_from([None, 0, 1, 3]))
     scene = random_scene(rng, draw(st.integers(1, max_n)), draw(st.integers(4, max_size)),
                          draw(st.integers(4, max_size)), scale_px=(0.5, 4.0), opacity=opacity, sh_degree=sh_degree)
     scene["background"] = rng.uniform(size=3)
+    scene["mode"] = draw(st.sampled_from(RASTERIZE_MODES))
     if sh_degree is not None:
         scene["sh_degree"] = sh_degree
     return scene
@@ -218,7 +221,7 @@ def test_rasterize_reference_vs_fast(device, backend, scene):
         assert_close(alpha, alpha_ref, rtol, name=f"{dtype} alpha", mask=~band)
         if dtype == torch.float64:
             assert meta["n_pairs"] == meta_ref["n_pairs"]
-            for key in ("mean2d", "depth", "cov2d", "conic", "colors"):
+            for key in ("mean2d", "depth", "cov2d", "conic", "compensation", "colors"):
                 assert_close(meta[key], meta_ref[key], rtol, name=key, floor=1.0)
             np.testing.assert_array_equal(meta["valid"].cpu().numpy(), meta_ref["valid"])
 
@@ -243,10 +246,12 @@ def test_rasterize_gradients_reference_vs_fast(device, backend, scene, seed):
 
 
 @pytest.mark.spec("VG-RENDER")
-def test_rasterize_gradcheck(device, backend):
+@pytest.mark.parametrize("mode", RASTERIZE_MODES)
+def test_rasterize_gradcheck(device, backend, mode):
     rng = np.random.default_rng(8)
     scene = random_scene(rng, 3, 6, 5, opacity=(0.3, 0.8))
     scene["background"] = rng.uniform(size=3)
+    scene["mode"] = mode
     # Finite differences step 1e-6: no pixel within 1e-4 of a threshold.
     assert not boundary_band(scene, 1e-4).any()
     static = {k: to_torch(v, device=device) if isinstance(v, np.ndarray) else v

@@ -389,3 +389,29 @@ def test_rasterize_gradient(scene_and_camera, seed):
         return anp.concatenate([anp.ravel(image), anp.ravel(alpha)])
 
     check_grads_fd(render, scene, (0, 1, 2, 3, 4), np.random.default_rng(seed))
+
+
+@pytest.mark.spec("VG-RENDER", "VG-PROJ")
+@pytest.mark.parametrize("var_px", [0.25, 1.0])
+def test_antialiased_mode_keeps_a_splats_integral_through_the_dilation(var_px):
+    # One isotropic splat of screen variance var_px (before EPS2D) in a 24 x 24 image. Its
+    # alpha summed over the pixels is a Riemann sum of o exp(-r^2 / (2 v)), i.e. o 2 pi v,
+    # less the tail that the 3-sigma box and ALPHA_MIN cut (0.5-0.8% here) and an aliasing
+    # error of e^(-2 pi^2 v) (1e-3 at the smallest v), hence 2%. "classic" renders the
+    # dilated variance v = var_px + EPS2D: a splat four times thinner than a pixel gets
+    # 2.2 times its mass. "antialiased" dilates by MIP_FILTER_VARIANCE and scales the
+    # opacity by compensation = var_px / v, which leaves the undilated integral o 2 pi var_px.
+    f, z, o = 10.0, 2.0, 0.9
+    s = np.sqrt(var_px) * z / f
+    K = intrinsics(f, f, 12.0, 12.0)
+    scene = isotropic_scene([[0.0, 0.0, z]], s, [o], [[1.0, 1.0, 1.0]])
+    sums = {mode: rasterize(*scene, np.eye(4), K, 24, 24, mode=mode)[1].sum() for mode in ("classic", "antialiased")}
+    assert sums["classic"] == pytest.approx(o * 2 * np.pi * (var_px + EPS2D), rel=0.02)
+    assert sums["antialiased"] == pytest.approx(o * 2 * np.pi * var_px, rel=0.02)
+
+
+@pytest.mark.spec("VG-RENDER")
+def test_rasterize_names_a_bad_mode():
+    scene = isotropic_scene([[0.0, 0.0, 2.0]], 0.1, [0.5], [[1.0, 1.0, 1.0]])
+    with pytest.raises(ValueError, match="mode"):
+        rasterize(*scene, np.eye(4), K8, 8, 8, mode="mip")

@@ -55,9 +55,10 @@ from velogauss_fast.motion.trajectory import base_state
 
 LEVELS = ("fit", "fit-all", "opt", "full")
 # The training variants compared (config overrides). "a" and "b" are the two schemes of
-# spec/motion.md at the defaults; the others change one thing each.
-VARIANTS = {
-    "a": [],
+# spec/motion.md; the others change one thing each. All of them were recorded with the classic
+# renderer, the default before model.rasterize_mode became "antialiased" (FIDELITY.md,
+# section 0), and keep it (CLASSIC below), so that a re-run reproduces its record.
+_CLASSIC_ERA = {
     "b": ["model.scheme=adf-step"],
     "a-no-gpc": ["model.ablation=no-gpc"],
     "a-no-adf": ["model.ablation=no-adf"],
@@ -96,7 +97,10 @@ COST_VARIANTS = {
 COST_VARIANTS.update({f"cost-v{v}-i{i}-fixed": [f"train.views={v}", f"train.iterations={i}",
                                                  *(f"{key}={value}" for key, value in SCHEDULE.items())]
                       for v in (1, 3) for i in (2000, 6000)})
-VARIANTS.update(COST_VARIANTS)
+_CLASSIC_ERA.update(COST_VARIANTS)
+CLASSIC = ["model.rasterize_mode=classic"]
+# "a": today's defaults; "a-classic": the defaults of the previous version.
+VARIANTS = {"a": [], "a-classic": CLASSIC, **{name: [*changes, *CLASSIC] for name, changes in _CLASSIC_ERA.items()}}
 DEFAULT_COST = "cost-v3-i3000"
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
 # The representational fit: points on the moving surfaces (a seed other than the

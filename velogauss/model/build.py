@@ -36,7 +36,7 @@ def model_from_state(cfg, profile: MotionProfile, state: dict) -> VeloGaussModel
 def scene_profile(cfg, metadata: dict | None) -> MotionProfile:
     """The `MotionProfile` of the config's effects for a scene with `metadata` (scene.json or None)."""
     return resolve_profile(cfg.model.effects, cfg.model.incompressible, metadata, cfg.model.acceleration,
-                           cfg.model.patterns)
+                           cfg.model.patterns, cfg.model.rasterize_mode)
 
 
 def profile_from_dict(values: dict) -> MotionProfile:
@@ -47,4 +47,4 @@ def profile_from_dict(values: dict) -> MotionProfile:
 def _assemble(cfg, profile, gaussians, rng):
     spec = resolve_motion_spec(cfg.model, profile, cfg.data.max_time)
     motion = MotionParameters(spec, rng) if spec.moving else None
-    return VeloGaussModel(gaussians, motion, spec)
+    return VeloGaussModel(gaussians, motion, spec, profile.rasterize_mode)

@@ -21,6 +21,7 @@ from velogauss.model.spec import MotionSpec
 from velogauss_fast.checks import check_array, check_finite
 from velogauss_fast.motion.scalars import check_time
 from velogauss_fast.quaternion import normalize_quat
+from velogauss_core.rendering import RasterizeMode, check_mode
 from velogauss_fast.raster import rasterize
 
 
@@ -28,11 +29,14 @@ class VeloGaussModel(nn.Module):
     """The model that `velogauss train` learns and `eval`, `render`, `export` use.
 
     gaussians: `Gaussians`; motion: `MotionParameters` or None (static scene); spec: the
-    `MotionSpec` both were built from.
+    `MotionSpec` both were built from; rasterize_mode: how its renders composite
+    (velogauss_core.rendering, the config's `model.rasterize_mode`).
     """
 
-    def __init__(self, gaussians, motion, spec: MotionSpec):
+    def __init__(self, gaussians, motion, spec: MotionSpec, rasterize_mode: RasterizeMode = "classic"):
         super().__init__()
+        check_mode(rasterize_mode)
+        self.rasterize_mode = rasterize_mode
         if (motion is not None) != spec.moving:
             raise ValueError(f"motion: expected {'MotionParameters' if spec.moving else 'None'} for this spec")
         self.gaussians = gaussians
@@ -76,7 +80,8 @@ class VeloGaussModel(nn.Module):
 
     def gaussians_at(self, t):
         """The Gaussians at time t as a dict: means, quats, scales, opacities (N,), colors
-        (N, (D+1)^2, 3) SH coefficients and sh_degree (what export and the renderer take)."""
+        (N, (D+1)^2, 3) SH coefficients, sh_degree and rasterize_mode (what export and the
+        renderer take)."""
         means, quats, scales, _ = self.state_at(t)
         return self.with_appearance(means, quats, scales)
 
@@ -84,7 +89,7 @@ class VeloGaussModel(nn.Module):
         """The `gaussians_at` dict for a given geometry (N, 3), (N, 4), (N, 3)."""
         g = self.gaussians
         return {"means": means, "quats": quats, "scales": scales, "opacities": g.opacities, "colors": g.sh,
-                "sh_degree": g.sh_degree}
+                "sh_degree": g.sh_degree, "rasterize_mode": self.rasterize_mode}
 
     def render(self, camera, t, background, spec: MotionSpec | None = None):
         """Render `camera` (velogauss.data.Camera) at time t over `background (3,)`:
@@ -140,4 +145,4 @@ def render_gaussians(g, camera, background):
     K = torch.as_tensor(camera.K, dtype=ref.dtype, device=ref.device)
     bg = torch.as_tensor(background, dtype=ref.dtype, device=ref.device)
     return rasterize(g["means"], g["quats"], g["scales"], g["opacities"], g["colors"], viewmat, K,
-                     camera.width, camera.height, background=bg, sh_degree=g["sh_degree"])
+                     camera.width, camera.height, background=bg, sh_degree=g["sh_degree"], mode=g["rasterize_mode"])

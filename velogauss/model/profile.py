@@ -25,6 +25,8 @@ rotation, gravity, stretch, shear, oscillation, static) and whether its motion i
   scene declares gravity; otherwise they drift uniformly (2 knots). Harmonic patterns bring
   their own acceleration (VG-ACC-HARM, at their frequencies), whatever `model.acceleration` says.
 - divergence loss (VG-DIV): only for incompressible motion.
+- how renders composite (VG-RENDER's mode), the config's `model.rasterize_mode`: kept with
+  the profile, which every checkpoint stores, so that a model renders as it was trained.
 - a scene with no motion effect (`static` alone) builds no velocity at all.
 """
 
@@ -46,8 +48,9 @@ class MotionProfile:
     "harmonic" (VG-ACC-HARM); divergence: the VG-DIV loss is used; pattern_form: the motion
     patterns' time dependence, "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID) or "harmonic"
     (VG-COEF-HARM); rigid_knots: VG-COEF-RIGID's knots per centre, 3 (under gravity) or 2
-    (uniform drift). acc_form defaults to "poly" and pattern_form
-    to "mlp", what every checkpoint saved before the rigid forms existed used.
+    (uniform drift); rasterize_mode: VG-RENDER's mode. acc_form defaults to "poly",
+    pattern_form to "mlp" and rasterize_mode to "classic", what every checkpoint saved before
+    each existed used.
     """
 
     effects: tuple
@@ -59,6 +62,7 @@ class MotionProfile:
     acc_form: str = "poly"
     pattern_form: str = "mlp"
     rigid_knots: int = 3
+    rasterize_mode: str = "classic"
 
     @property
     def n_columns(self):
@@ -66,8 +70,10 @@ class MotionProfile:
         return sum(self.mask)
 
 
-def resolve_profile(effects, incompressible, metadata=None, acceleration="poly", patterns="mlp"):
-    """The `MotionProfile` of `effects` / `incompressible` / `acceleration` / `patterns` ("auto" or explicit values).
+def resolve_profile(effects, incompressible, metadata=None, acceleration="poly", patterns="mlp",
+                    rasterize_mode="classic"):
+    """The `MotionProfile` of `effects` / `incompressible` / `acceleration` / `patterns` ("auto"
+    or explicit values) and `rasterize_mode`.
 
     "auto" takes the scene's declaration from `metadata` (a parsed scene.json), else every
     effect but oscillation (UNDECLARED_EFFECTS) and incompressible motion (what NVFi-style
@@ -80,6 +86,8 @@ def resolve_profile(effects, incompressible, metadata=None, acceleration="poly",
     else mlp. Harmonic patterns take the harmonic acceleration (VG-ACC-HARM), which needs their
     frequencies, whatever `acceleration` says. ValueError when "rigid" is asked of a scene that
     stretches or shears.
+    `rasterize_mode` (config `model.rasterize_mode`, default "classic" here, what checkpoints
+    before it used): "classic" or "antialiased" (velogauss_core.rendering), taken as it is.
     """
     if effects == "auto":
         effects = tuple((metadata or {}).get("effects", UNDECLARED_EFFECTS))
@@ -117,7 +125,7 @@ def resolve_profile(effects, incompressible, metadata=None, acceleration="poly",
                          acc_form=form, pattern_form=patterns,
                          # Without gravity nothing accelerates a body's centre: it drifts
                          # uniformly, and a third knot would only let noise bend its path.
-                         rigid_knots=3 if "gravity" in effects else 2)
+                         rigid_knots=3 if "gravity" in effects else 2, rasterize_mode=rasterize_mode)
 
 
 def _columns(groups):

@@ -1,7 +1,7 @@
 """gsplat's CUDA tile rasterizer behind velogauss's projection (backend="gsplat").
 
 Projection (VG-QUAT, VG-COV, VG-PROJ), culling and colours (VG-SH) are velogauss_fast's
-own, so near/far planes, EPS2D, the Jacobian clamp, radii and validity are exactly ours
+own, so near/far planes, the dilation, the Jacobian clamp, radii and validity are exactly ours
 and meta["mean2d"] is the tensor gsplat differentiates. gsplat (>= 1.5, float32 only)
 then does tile intersection and compositing, which differs from VG-RENDER in three ways:
 
@@ -18,6 +18,7 @@ import math
 
 import torch
 
+from velogauss_core.rendering import dilation, splat_opacities
 from velogauss_fast.covariance import covariance_3d
 from velogauss_fast.projection import project_gaussians
 from velogauss_fast.sh import sh_to_color, viewing_directions
@@ -26,7 +27,8 @@ _TILE_SIZE = 16  # gsplat's default and only tested tile size
 _INT32_MAX = 2**31 - 1
 
 
-def rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree):
+def rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree,
+                     mode="classic"):
     """`velogauss_fast.raster.rasterize` with gsplat's CUDA compositing; same arguments and outputs.
 
     Computes in the input dtype up to the compositing, which runs in float32 (gsplat's
@@ -34,11 +36,12 @@ def rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width,
     """
     from gsplat import isect_offset_encode, isect_tiles, rasterize_to_pixels
 
-    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height)
+    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height, dilation(mode))
     if sh_degree is None:
         rgb = colors
     else:
         rgb = sh_to_color(colors, viewing_directions(means, viewmat), sh_degree)
+    opacities = splat_opacities(opacities, proj["compensation"], mode)
     # gsplat skips Gaussians with radius 0; our box is square, hence equal x and y radii.
     radius = torch.where(proj["valid"], proj["radius"], torch.zeros_like(proj["radius"]))
     radii = radius.clamp(max=_INT32_MAX).to(torch.int32)[:, None].expand(-1, 2)
