@@ -94,6 +94,13 @@ class _ModelChoices:
     # (translation, rotation, gravity), else mlp. "auto" is the default: on toss, rigid took
     # the future velocity error from 0.164 to 0.016 (benchmarks/FIDELITY.md, section 1).
     patterns: Union[Literal["auto"], PatternForm] = "auto"
+    # How the mixing weights of VG-COEF start: "uniform" as the networks' random weights leave
+    # them (every pattern ~1/K everywhere), "clusters" fitted to a k-means partition of the
+    # initial points, each region on its own pattern (velogauss.train.mixing), or "auto":
+    # clusters when the scene declares a `static` body beside moving ones (several motions to
+    # tell apart), else uniform. On multi, clusters took the velocity error from 0.566 / 0.765
+    # to 0.38 / 0.62; on toss, one body, they made it worse (benchmarks/FIDELITY.md, section 0).
+    mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
 

@@ -116,6 +116,16 @@ ACC_HARMONICS = 2
 # resolves, yet well above the residual motion a trained field leaves on still ground
 # (0.05-0.2 px on the `multi` scene's ground, against 15 px and more on its moving bodies).
 STATIC_MOTION_PX = 0.25
+# VG-COEF's initialisation "clusters" (velogauss.train.mixing): each initial point puts this
+# weight on its k-means cluster's pattern. A probe that gave every body of `multi` its own
+# pattern through a logit bias of 5 (a weight of e^5 / (e^5 + 31) = 0.83 with K = 32) learned
+# the spins; 0.8 keeps the others' share large enough that a particle on a cluster that
+# straddles two bodies still gets their gradient and can move to the other body's pattern.
+MIXING_INIT_WEIGHT = 0.8
+# Adam steps and rate of that fit (full batch over the initial points): the cross-entropy
+# levels off within about 200 steps on the catalogue scenes, in about a second.
+MIXING_INIT_STEPS = 300
+MIXING_INIT_LR = 1e-2
 
 # --- Data loading (velogauss.data) -----------------------------------------------------
 # A camera pose is accepted as rigid when its rotation block R satisfies

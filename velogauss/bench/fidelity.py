@@ -99,8 +99,24 @@ COST_VARIANTS.update({f"cost-v{v}-i{i}-fixed": [f"train.views={v}", f"train.iter
                       for v in (1, 3) for i in (2000, 6000)})
 _CLASSIC_ERA.update(COST_VARIANTS)
 CLASSIC = ["model.rasterize_mode=classic"]
-# "a": today's defaults; "a-classic": the defaults of the previous version.
-VARIANTS = {"a": [], "a-classic": CLASSIC, **{name: [*changes, *CLASSIC] for name, changes in _CLASSIC_ERA.items()}}
+# With the antialiased renderer ("-aa": ablations re-run under the renderer the full model
+# uses), and the probes of multi's mixing (FIDELITY.md, section 0).
+_ANTIALIASED_ERA = {
+    "a-no-gpc-aa": ["model.ablation=no-gpc"],
+    "deform-only-aa": ["model.ablation=deform-only"],
+    "a-curriculum2400": ["train.curriculum=2400"],
+    "a-freqs6": ["model.n_freqs_x=6"],
+    "a-freqs8": ["model.n_freqs_x=8"],
+}
+# Every variant above was recorded before model.mixing_init = "auto" started multi's patterns
+# apart (section 0) and keeps the uniform start, so that a re-run reproduces its record (on
+# the other scenes "auto" is the uniform start: nothing changes there).
+UNIFORM = ["model.mixing_init=uniform"]
+# "a": today's defaults; "a-uniform" and "a-classic": those of the two versions before.
+VARIANTS = {"a": [], "a-uniform": UNIFORM, "a-clusters": ["model.mixing_init=clusters"],
+            "a-classic": [*CLASSIC, *UNIFORM],
+            **{name: [*changes, *UNIFORM] for name, changes in _ANTIALIASED_ERA.items()},
+            **{name: [*changes, *CLASSIC, *UNIFORM] for name, changes in _CLASSIC_ERA.items()}}
 DEFAULT_COST = "cost-v3-i3000"
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
 # The representational fit: points on the moving surfaces (a seed other than the

@@ -39,6 +39,7 @@ from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.frequency import start_frequency
+from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train.sampling import FrameSampler, camera_extent, collocation_near, collocation_points
 from velogauss.train.static import detect_moving, pixel_footprint
@@ -126,6 +127,8 @@ def prepare(cfg, data, run_dir, resume=False):
         cfg = resolve_transport(cfg, profile.pattern_form)
         points, colors = _initial_points(data, cfg.model.init_points, rng)
         model = build_model(cfg, profile, points, colors, rng).to(device)
+        if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, profile) == "clusters":
+            separate_patterns(model.motion, model.gaussians.means, rng)
         start_frequency(model, data.train, data.max_time)
         start, extra = 0, {"elapsed_s": 0.0, "after_reset": False, "psnr_ema": None}
         run_dir.mkdir(parents=True, exist_ok=True)
