@@ -99,7 +99,7 @@ class _ModelChoices:
     # initial points, each region on its own pattern (velogauss.train.mixing), or "auto":
     # clusters when the scene declares a `static` body beside moving ones (several motions to
     # tell apart), else uniform. On multi, clusters took the velocity error from 0.566 / 0.765
-    # to 0.38 / 0.62; on toss, one body, they made it worse (benchmarks/FIDELITY.md, section 0).
+    # to 0.38 / 0.62; on toss, one body, they made it worse (benchmarks/FIDELITY.md, section 0b).
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
@@ -135,7 +135,7 @@ class ModelConfig(MotionSizes, _ModelChoices):
     # 0.3 px^2), or "antialiased", Mip-Splatting's 2D filter (0.1 px^2, the opacity times the
     # splat's integral before the dilation over its integral after). Under "classic" the
     # learned rate of strain came out 4-7 % too large on grow and shear; "antialiased" was
-    # better on every scene (benchmarks/FIDELITY.md, section 0).
+    # better on every scene (benchmarks/FIDELITY.md, section 0c).
     rasterize_mode: RasterizeMode = "antialiased"
 
 
@@ -183,6 +183,13 @@ class TrainConfig:
     # and the window is at most [0, 1]).
     carry_horizon: _float(gt=0.0, le=1.0) = 0.25
     carry_points: Count = 2048  # VG-LOSS-CARRY: moving Gaussians drawn per iteration
+    # VG-LOSS-MIX: weight of the mixing weights' entropy (affine velocity), which pushes each
+    # particle to commit to one motion pattern; 0 disables it. On multi (2 seeds) 1e-3 took the
+    # velocity error from 0.365 / 0.564 to 0.160 / 0.162; 1e-4, 5e-4, 3e-3 and 1e-2 did less,
+    # and it needs the patterns to start apart (from the uniform start every body took one
+    # pattern: 0.66 / 0.73). It did not hurt the one-body scenes (benchmarks/FIDELITY.md, section 0).
+    lambda_mix: _float(ge=0.0) = 1e-3
+    mix_points: Count = 2048  # VG-LOSS-MIX: moving Gaussians drawn per iteration
     # After the warm-up only the motion trains (the error budget's optimisation floor,
     # benchmarks/FIDELITY.md).
     motion_only: Flag = False

@@ -31,7 +31,7 @@ EPS2D = 0.3
 # The dilation of the "antialiased" mode (VG-RENDER), Mip-Splatting's 2D Mip filter: about
 # the variance of a one-pixel box filter (1/12), the filter a rendered pixel should apply.
 # With EPS2D instead, the learned rate of strain of grow and shear stayed 3-4 % too large
-# (benchmarks/FIDELITY.md, section 0); Mip-Splatting uses 0.1.
+# (benchmarks/FIDELITY.md, section 0c); Mip-Splatting uses 0.1.
 MIP_FILTER_VARIANCE = 0.1
 # Floor under det(cov2d before EPS2D) / det(cov2d), the square of the antialiased mode's
 # opacity factor (VG-PROJ 5, VG-RENDER): at the floor the factor is 1e-6, so the splat's

@@ -6,7 +6,7 @@ about a pixel's own box filter, and the opacity times VG-PROJ's `compensation`, 
 integral before the dilation over its integral after (gsplat's `rasterize_mode=
 "antialiased"`). A splat thinner than a pixel is then dimmed instead of widened, so a
 Gaussian scaled by λ renders close to λ times its image, which a stretching body needs
-(benchmarks/FIDELITY.md, section 0).
+(benchmarks/FIDELITY.md, section 0c).
 """
 
 from typing import Literal, get_args

@@ -1,8 +1,10 @@
-"""Training losses in torch: photometric and physics. Twin of `velogauss_ref.losses`.
+"""Training losses in torch: photometric, physics and mixing entropy. Twin of `velogauss_ref.losses`.
 
-spec/losses_metrics.md, VG-LOSS and VG-LOSS-PHYS. Results are 0-d tensors in the inputs'
+spec/losses_metrics.md, VG-LOSS, VG-LOSS-PHYS and VG-LOSS-MIX. Results are 0-d tensors in the inputs'
 dtype and on their device.
 """
+
+import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.metrics import ssim
@@ -39,3 +41,16 @@ def physics_loss(r, div, lambda_transport, lambda_div):
     if div is not None:
         loss = loss + lambda_div * (div * div).sum() / count
     return loss
+
+
+def mixing_entropy_loss(logits, weight):
+    """weight · mean_i H(softmax(logits_i)), H(p) = −Σ_k p_k log p_k (VG-LOSS-MIX).
+
+    logits: (N, K) mixing logits z A + c of VG-COEF; weight: finite number >= 0. The log
+    weights come from log_softmax, so a saturated row (p_k = 0 in floating point) adds 0,
+    not 0 · log 0 = NaN. N = 0 gives 0. Bad input raises ValueError naming the argument.
+    """
+    check_array("logits", logits, (None, None))
+    check_weight("weight", weight)
+    log_p = torch.log_softmax(logits, dim=-1)
+    return weight * -(log_p.exp() * log_p).sum() / max(logits.shape[0], 1)

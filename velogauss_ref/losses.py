@@ -1,9 +1,11 @@
-"""Training losses: the photometric loss of a rendered image and the physics loss.
+"""Training losses: the photometric loss of a rendered image, the physics loss and the
+mixing weights' entropy.
 
-spec/losses_metrics.md, VG-LOSS and VG-LOSS-PHYS. Differentiable by autograd.
+spec/losses_metrics.md, VG-LOSS, VG-LOSS-PHYS and VG-LOSS-MIX. Differentiable by autograd.
 """
 
 import autograd.numpy as np
+from autograd.scipy.special import logsumexp
 
 from velogauss_core.checks import check_weight
 from velogauss_ref.checks import check_array
@@ -41,3 +43,18 @@ def physics_loss(r, div, lambda_transport, lambda_div):
     if div is not None:
         loss = loss + lambda_div * np.sum(div * div) / count
     return loss
+
+
+def mixing_entropy_loss(logits, weight):
+    """weight · mean_i H(softmax(logits_i)), H(p) = −Σ_k p_k log p_k (VG-LOSS-MIX).
+
+    logits: (N, K) mixing logits z A + c of VG-COEF; weight: a finite weight >= 0. The
+    entropy of one row is 0 when it puts all its weight on one pattern and log K when it
+    spreads it evenly. log p = l − logsumexp(l), so a saturated row (p_k = 0 in floating
+    point) adds 0, not 0 · log 0 = NaN. N = 0 gives 0. Bad input raises ValueError naming
+    the argument.
+    """
+    check_array("logits", logits, (None, None))
+    check_weight("weight", weight)
+    log_p = logits - logsumexp(logits, axis=1, keepdims=True)
+    return weight * -np.sum(np.exp(log_p) * log_p) / max(np.shape(logits)[0], 1)

@@ -1,4 +1,4 @@
-"""velogauss_fast.losses: VG-LOSS and VG-LOSS-PHYS against velogauss_ref.losses."""
+"""velogauss_fast.losses: VG-LOSS, VG-LOSS-PHYS and VG-LOSS-MIX against velogauss_ref.losses."""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from tests.fast.render_cases import DEVICE_SETTINGS, check_agreement, check_float32, gradcheck_fn
 from tests.fast.test_metrics import summed
 from tests.ref.test_losses import offset_pair
-from velogauss_fast.losses import photometric_loss, physics_loss
+from velogauss_fast.losses import mixing_entropy_loss, photometric_loss, physics_loss
 from velogauss_ref import losses as ref
 
 seeds = st.integers(0, 2**32 - 1)
@@ -66,6 +66,43 @@ def test_physics_loss_gradcheck(device):
     rng = np.random.default_rng(6)
     gradcheck_fn(lambda r, div: physics_loss(r, div, 0.3, 0.7), (rng.standard_normal((5, 3)), rng.standard_normal(5)),
                  diff=(0, 1), device=device)
+
+
+@pytest.mark.spec("VG-LOSS-MIX")
+@DEVICE_SETTINGS
+@given(seed=seeds, n=st.integers(0, 9), k=st.integers(2, 8), weight=weights, spread=st.floats(0.1, 30.0))
+def test_mixing_entropy_reference_vs_fast(device, seed, n, k, weight, spread):
+    rng = np.random.default_rng(seed)
+    logits = spread * rng.standard_normal((n, k))  # spread 30: rows that are one-hot in float32
+    # log_softmax against logits - logsumexp: a few ulps; RTOL64 1e-9.
+    check_agreement(ref.mixing_entropy_loss, mixing_entropy_loss, (logits, weight), diff=(0,), device=device,
+                    seed=seed)
+    # float32: a nearly one-hot row has an entropy far below its terms' rounding (seen: 3.9e-4
+    # off by 5.8e-8 at spread 20), so the scale is the weight's nats: RTOL32 of weight.
+    check_float32(ref.mixing_entropy_loss, mixing_entropy_loss, (logits, weight), device, floor=weight)
+
+
+@pytest.mark.spec("VG-LOSS-MIX")
+def test_mixing_entropy_gradcheck(device):
+    rng = np.random.default_rng(7)
+    gradcheck_fn(lambda logits: mixing_entropy_loss(logits, 0.4), (2.0 * rng.standard_normal((4, 5)),), diff=(0,),
+                 device=device)
+
+
+@pytest.mark.spec("VG-LOSS-MIX")
+def test_mixing_entropy_of_a_saturated_row_is_finite_with_finite_gradient(device):
+    logits = torch.tensor([[0.0, 1e4, 0.0], [1.0, 1.0, 1.0]], dtype=torch.float32, device=device, requires_grad=True)
+    loss = mixing_entropy_loss(logits, 1.0)
+    loss.backward()
+    assert float(loss.detach()) == pytest.approx(np.log(3.0) / 2, rel=1e-6)
+    assert bool(torch.isfinite(logits.grad).all())
+
+
+@pytest.mark.parametrize("logits, weight, name", [(torch.zeros(4), 1.0, "logits"),
+                                                  (torch.zeros(2, 3), float("nan"), "weight")])
+def test_mixing_entropy_bad_input_names_the_argument(logits, weight, name):
+    with pytest.raises(ValueError, match=f"^{name}:"):
+        mixing_entropy_loss(logits, weight)
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""velogauss_ref.losses: VG-LOSS (photometric) and VG-LOSS-PHYS (physics)."""
+"""velogauss_ref.losses: VG-LOSS (photometric), VG-LOSS-PHYS (physics) and VG-LOSS-MIX (mixing entropy)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.test_metrics import SSIM_FD_STEP, skimage_ssim
 from velogauss_core.constants import LAMBDA_DSSIM
-from velogauss_ref.losses import photometric_loss, physics_loss
+from velogauss_ref.losses import mixing_entropy_loss, photometric_loss, physics_loss
 
 seeds = st.integers(0, 2**32 - 1)
 sizes = st.integers(11, 14)
@@ -71,6 +71,38 @@ def test_physics_loss_gradient(seed, n, lambda_transport, lambda_div):
     rng = np.random.default_rng(seed)
     r, div = rng.standard_normal((n, 3)), rng.standard_normal(n)
     check_grads_fd(lambda r, div: physics_loss(r, div, lambda_transport, lambda_div), (r, div), (0, 1), rng)
+
+
+@pytest.mark.spec("VG-LOSS-MIX")
+def test_mixing_entropy_known_values():
+    # Even over K patterns: log K; all on one: 0; (1/2, 1/2, 0, ...): log 2. Any shift of a
+    # row's logits leaves its softmax, and so its entropy, unchanged.
+    k = 5
+    even, one_hot = np.zeros((1, k)), np.array([[0.0, 800.0, 0.0, 0.0, 0.0]])
+    pair = np.array([[3.0, 3.0, -900.0, -900.0, -900.0]])
+    assert mixing_entropy_loss(even, 1.0) == pytest.approx(np.log(k), abs=1e-15)
+    assert mixing_entropy_loss(one_hot, 1.0) == 0.0  # p = (0, 1, 0, 0, 0) exactly: 0, not NaN
+    assert mixing_entropy_loss(pair, 1.0) == pytest.approx(np.log(2.0), abs=1e-15)
+    assert mixing_entropy_loss(np.vstack([even, pair]) + 7.0, 0.5) == pytest.approx(0.25 * np.log(10.0), abs=1e-15)
+
+
+@pytest.mark.spec("VG-LOSS-MIX")
+def test_mixing_entropy_without_particles_is_zero():
+    assert mixing_entropy_loss(np.zeros((0, 4)), 1.0) == 0.0
+
+
+@pytest.mark.spec("VG-LOSS-MIX")
+@given(seeds, st.integers(1, 6), st.integers(2, 6), st.floats(0.01, 2.0))
+def test_mixing_entropy_gradient(seed, n, k, weight):
+    rng = np.random.default_rng(seed)
+    check_grads_fd(lambda logits: mixing_entropy_loss(logits, weight), (2.0 * rng.standard_normal((n, k)),), (0,), rng)
+
+
+@pytest.mark.parametrize("logits, weight, name", [(np.zeros(4), 1.0, "logits"), (np.full((2, 3), np.nan), 1.0, "logits"),
+                                                  (np.zeros((2, 3)), -1.0, "weight")])
+def test_mixing_entropy_bad_input_names_the_argument(logits, weight, name):
+    with pytest.raises(ValueError, match=f"^{name}:"):
+        mixing_entropy_loss(logits, weight)
 
 
 @pytest.mark.parametrize(

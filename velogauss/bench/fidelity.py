@@ -57,7 +57,7 @@ LEVELS = ("fit", "fit-all", "opt", "full")
 # The training variants compared (config overrides). "a" and "b" are the two schemes of
 # spec/motion.md; the others change one thing each. All of them were recorded with the classic
 # renderer, the default before model.rasterize_mode became "antialiased" (FIDELITY.md,
-# section 0), and keep it (CLASSIC below), so that a re-run reproduces its record.
+# section 0c), and keep it (CLASSIC below), so that a re-run reproduces its record.
 _CLASSIC_ERA = {
     "b": ["model.scheme=adf-step"],
     "a-no-gpc": ["model.ablation=no-gpc"],
@@ -100,7 +100,7 @@ COST_VARIANTS.update({f"cost-v{v}-i{i}-fixed": [f"train.views={v}", f"train.iter
 _CLASSIC_ERA.update(COST_VARIANTS)
 CLASSIC = ["model.rasterize_mode=classic"]
 # With the antialiased renderer ("-aa": ablations re-run under the renderer the full model
-# uses), and the probes of multi's mixing (FIDELITY.md, section 0).
+# uses), and the probes of multi's mixing (FIDELITY.md, section 0b).
 _ANTIALIASED_ERA = {
     "a-no-gpc-aa": ["model.ablation=no-gpc"],
     "deform-only-aa": ["model.ablation=deform-only"],
@@ -108,15 +108,25 @@ _ANTIALIASED_ERA = {
     "a-freqs6": ["model.n_freqs_x=6"],
     "a-freqs8": ["model.n_freqs_x=8"],
 }
+# The mixing entropy (VG-LOSS-MIX): its weight, from the uniform start, and with a finer code
+# (section 0).
+_MIXING_ERA = {"a-mix1e-4": ["train.lambda_mix=1e-4"], "a-mix5e-4": ["train.lambda_mix=5e-4"],
+               "a-mix3e-3": ["train.lambda_mix=3e-3"], "a-mix1e-2": ["train.lambda_mix=1e-2"],
+               "a-mix1e-3-uniform": ["train.lambda_mix=1e-3", "model.mixing_init=uniform"],
+               "a-mix1e-3-freqs6": ["train.lambda_mix=1e-3", "model.n_freqs_x=6"]}
 # Every variant above was recorded before model.mixing_init = "auto" started multi's patterns
-# apart (section 0) and keeps the uniform start, so that a re-run reproduces its record (on
+# apart (section 0b) and keeps the uniform start, so that a re-run reproduces its record (on
 # the other scenes "auto" is the uniform start: nothing changes there).
 UNIFORM = ["model.mixing_init=uniform"]
-# "a": today's defaults; "a-uniform" and "a-classic": those of the two versions before.
-VARIANTS = {"a": [], "a-uniform": UNIFORM, "a-clusters": ["model.mixing_init=clusters"],
-            "a-classic": [*CLASSIC, *UNIFORM],
-            **{name: [*changes, *UNIFORM] for name, changes in _ANTIALIASED_ERA.items()},
-            **{name: [*changes, *CLASSIC, *UNIFORM] for name, changes in _CLASSIC_ERA.items()}}
+# Every variant but the mixing entropy's own was recorded before train.lambda_mix became 1e-3
+# (section 0) and keeps it off.
+NOMIX = ["train.lambda_mix=0"]
+# "a": today's defaults; "a-nomix", "a-uniform" and "a-classic": those of the three versions before.
+VARIANTS = {"a": [], "a-nomix": NOMIX, "a-uniform": [*UNIFORM, *NOMIX],
+            "a-clusters": ["model.mixing_init=clusters", *NOMIX], "a-classic": [*CLASSIC, *UNIFORM, *NOMIX],
+            **_MIXING_ERA,
+            **{name: [*changes, *UNIFORM, *NOMIX] for name, changes in _ANTIALIASED_ERA.items()},
+            **{name: [*changes, *CLASSIC, *UNIFORM, *NOMIX] for name, changes in _CLASSIC_ERA.items()}}
 DEFAULT_COST = "cost-v3-i3000"
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
 # The representational fit: points on the moving surfaces (a seed other than the

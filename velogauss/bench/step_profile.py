@@ -40,6 +40,7 @@ PARTS = [
     ("compositing forward (numba)", 2, [("backends/numba_backend.py", "forward")]),
     ("photometric loss", 1, [("velogauss_fast/losses.py", "photometric_loss")]),
     ("physics residuals (`motion_residuals`)", 1, [("model/motion.py", "motion_residuals")]),
+    ("mixing entropy (`mixing_loss`, VG-LOSS-MIX)", 1, [("train/loop.py", "mixing_loss")]),
     ("backward (`loss.backward`)", 1, [("torch/_tensor.py", "backward")]),
     ("compositing backward (numba)", 2, [("backends/numba_backend.py", "backward")]),
     ("density statistics", 1, [("train/densify.py", "add")]),

@@ -6,7 +6,8 @@ Per iteration (velogauss.config holds every number):
    of its time (velogauss.train.sampling);
 2. move the Gaussians to that time once (VG-TRAJ + VG-ADF) and render each view (VG-RENDER);
 3. loss = photometric (VG-LOSS, the mean over the views) + ramped physics loss (VG-LOSS-PHYS) on collocation
-   points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual);
+   points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual)
+   + the mixing weights' entropy (VG-LOSS-MIX: each particle commits to one motion pattern);
 4. Adam step with the scheduled learning rates; density statistics; every
    `densify.every` iterations clone/split/prune, opacity resets (each followed by at least a
    reset period of training), static-particle detection.
@@ -43,8 +44,9 @@ from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train.sampling import FrameSampler, camera_extent, collocation_near, collocation_points
 from velogauss.train.static import detect_moving, pixel_footprint
-from velogauss_fast.losses import photometric_loss, physics_loss
+from velogauss_fast.losses import mixing_entropy_loss, photometric_loss, physics_loss
 from velogauss_fast.metrics import psnr
+from velogauss_fast.motion.code import physics_code
 from velogauss_core.constants import STATIC_MOTION_PX
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
@@ -222,6 +224,8 @@ class _Loop:
             loss = loss + self.physics_loss(it, params, spec)
         if motion_on and spec.carry_loss and cfg.train.lambda_carry > 0:
             loss = loss + cfg.train.lambda_carry * self.carry_loss(it, params, spec)
+        if motion_on and spec.velocity == "affine" and cfg.train.lambda_mix > 0:
+            loss = loss + self.mixing_loss(params)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         for _, meta, camera in renders:
@@ -278,6 +282,18 @@ class _Loop:
             idx = idx[torch.as_tensor(self.rng.choice(len(idx), t_cfg.carry_points, replace=False), device=idx.device)]
         x0, q0, s0 = (v.detach().index_select(0, idx) for v in (g.means, g.quats, g.scales))
         return carry_loss(params, spec, x0, q0, s0, t_a, t)
+
+    def mixing_loss(self, params):
+        """VG-LOSS-MIX on up to `mix_points` moving Gaussians' canonical means (detached: the
+        entropy shapes the code and mixing networks, it does not move the Gaussians)."""
+        t_cfg, model = self.cfg.train, self.model
+        idx = torch.nonzero(model.moving).squeeze(1)
+        if len(idx) > t_cfg.mix_points:
+            idx = idx[torch.as_tensor(self.rng.choice(len(idx), t_cfg.mix_points, replace=False), device=idx.device)]
+        x0 = model.gaussians.means.detach().index_select(0, idx)
+        A, c = params["mix"][0]
+        logits = physics_code(params, x0, model.motion.spec.config) @ A + c
+        return mixing_entropy_loss(logits, t_cfg.lambda_mix)
 
     def physics_loss(self, it, params, spec):
         """Ramped VG-LOSS-PHYS on fresh collocation points (motion parameter dict `params`),

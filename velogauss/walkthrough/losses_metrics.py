@@ -1,12 +1,13 @@
 """Walkthrough part: what training minimises and what evaluation reports
-(VG-LOSS, VG-LOSS-PHYS, VG-METRIC, VG-METRIC-SSIM, VG-METRIC-LPIPS)."""
+(VG-LOSS, VG-LOSS-PHYS, VG-LOSS-MIX, VG-METRIC, VG-METRIC-SSIM, VG-METRIC-LPIPS)."""
 
 import functools
 
 import numpy as np
 
-from velogauss_ref.losses import physics_loss, photometric_loss
+from velogauss_ref.losses import mixing_entropy_loss, physics_loss, photometric_loss
 from velogauss_ref.metrics import lpips, psnr, ssim
+from velogauss_ref.motion.code import physics_code
 from velogauss_ref.physics.residuals import divergence, transport_residual
 from velogauss_ref.raster import rasterize
 from velogauss.walkthrough.blending import RENDER_FOCAL, RENDER_SIZE, WHITE
@@ -86,6 +87,28 @@ def physics_loss_section(figures):
     )
 
 
+def mixing_entropy_section(figures):
+    """VG-LOSS-MIX: the random field's mixing logits at the three points, an even and a one-hot row."""
+    params = fields()["random network"]
+    A, c = params["mix"][0]
+    logits = physics_code(params, POINTS, CFG) @ A + c
+    k = CFG.n_patterns
+    return Section(
+        "Each particle moves with a mixture of the K motion patterns (VG-COEF). A particle whose "
+        "weights are spread moves with their average, so one pattern must then serve several bodies. "
+        "This loss is the mean entropy of the particles' weights: 0 when each puts all its weight on "
+        f"one pattern, log K when it spreads it evenly (K = {k} here, log K = {np.log(k):.4f}). "
+        "Training adds it with weight 1e-3 at moving Gaussians. Here: the random network field's "
+        "logits at the three points, an even row and a one-hot row.",
+        [session({"logits": logits},
+                 "mixing_entropy_loss(logits, weight=1.0)", {"L": mixing_entropy_loss(logits, 1.0)},
+                 f"mixing_entropy_loss(np.zeros((1, {k})), 1.0)  # even weights: log K",
+                 {"L": mixing_entropy_loss(np.zeros((1, k)), 1.0)},
+                 f"mixing_entropy_loss(np.array([[0.0, 800.0] + [0.0] * {k - 2}]), 1.0)  # one-hot in floating point",
+                 {"L": mixing_entropy_loss(np.array([[0.0, 800.0] + [0.0] * (k - 2)]), 1.0)})],
+    )
+
+
 def psnr_section(figures):
     """VG-METRIC: PSNR of the shifted and noisy images, and the 100 dB cap."""
     gt, shifted, noisy = images()
@@ -127,5 +150,6 @@ def lpips_section(figures):
     )
 
 
-SECTIONS = {"VG-LOSS": photometric_section, "VG-LOSS-PHYS": physics_loss_section, "VG-METRIC": psnr_section,
+SECTIONS = {"VG-LOSS": photometric_section, "VG-LOSS-PHYS": physics_loss_section,
+            "VG-LOSS-MIX": mixing_entropy_section, "VG-METRIC": psnr_section,
             "VG-METRIC-SSIM": ssim_section, "VG-METRIC-LPIPS": lpips_section}
