@@ -185,9 +185,10 @@ class TrainConfig:
     carry_points: Count = 2048  # VG-LOSS-CARRY: moving Gaussians drawn per iteration
     # VG-LOSS-MIX: weight of the mixing weights' entropy (affine velocity), which pushes each
     # particle to commit to one motion pattern; 0 disables it. On multi (2 seeds) 1e-3 took the
-    # velocity error from 0.365 / 0.564 to 0.160 / 0.162; 1e-4, 5e-4, 3e-3 and 1e-2 did less,
+    # velocity error from 0.365 / 0.564 to 0.161 / 0.162; 1e-4, 5e-4, 3e-3 and 1e-2 did less,
     # and it needs the patterns to start apart (from the uniform start every body took one
-    # pattern: 0.66 / 0.73). It did not hurt the one-body scenes (benchmarks/FIDELITY.md, section 0).
+    # pattern: 0.66 / 0.73). On the one-body scenes the velocity error stayed or fell; shear
+    # and pulse lost 0.2-0.5 dB of PSNR (benchmarks/FIDELITY.md, section 0).
     lambda_mix: _float(ge=0.0) = 1e-3
     mix_points: Count = 2048  # VG-LOSS-MIX: moving Gaussians drawn per iteration
     # After the warm-up only the motion trains (the error budget's optimisation floor,

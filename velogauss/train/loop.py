@@ -47,6 +47,7 @@ from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.losses import mixing_entropy_loss, photometric_loss, physics_loss
 from velogauss_fast.metrics import psnr
 from velogauss_fast.motion.code import physics_code
+from velogauss_fast.motion.coefficients import mixing_logits
 from velogauss_core.constants import STATIC_MOTION_PX
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
@@ -273,27 +274,28 @@ class _Loop:
         """VG-LOSS-CARRY on up to `carry_points` moving Gaussians, between two times of the
         window opened so far (the ADF has seen no frame after it): t uniform in it, t_a up
         to `carry_horizon` away on either side."""
-        t_cfg, g, model = self.cfg.train, self.model.gaussians, self.model
+        t_cfg, g = self.cfg.train, self.model.gaussians
         window = self.sampler.window(it)
         t = float(self.rng.uniform(0.0, window))
         t_a = float(np.clip(t + self.rng.uniform(-t_cfg.carry_horizon, t_cfg.carry_horizon), 0.0, window))
-        idx = torch.nonzero(model.moving).squeeze(1)
-        if len(idx) > t_cfg.carry_points:
-            idx = idx[torch.as_tensor(self.rng.choice(len(idx), t_cfg.carry_points, replace=False), device=idx.device)]
+        idx = self.draw_moving(t_cfg.carry_points)
         x0, q0, s0 = (v.detach().index_select(0, idx) for v in (g.means, g.quats, g.scales))
         return carry_loss(params, spec, x0, q0, s0, t_a, t)
 
     def mixing_loss(self, params):
         """VG-LOSS-MIX on up to `mix_points` moving Gaussians' canonical means (detached: the
         entropy shapes the code and mixing networks, it does not move the Gaussians)."""
-        t_cfg, model = self.cfg.train, self.model
-        idx = torch.nonzero(model.moving).squeeze(1)
-        if len(idx) > t_cfg.mix_points:
-            idx = idx[torch.as_tensor(self.rng.choice(len(idx), t_cfg.mix_points, replace=False), device=idx.device)]
-        x0 = model.gaussians.means.detach().index_select(0, idx)
-        A, c = params["mix"][0]
-        logits = physics_code(params, x0, model.motion.spec.config) @ A + c
-        return mixing_entropy_loss(logits, t_cfg.lambda_mix)
+        x0 = self.model.gaussians.means.detach().index_select(0, self.draw_moving(self.cfg.train.mix_points))
+        z = physics_code(params, x0, self.model.motion.spec.config)
+        return mixing_entropy_loss(mixing_logits(params, z), self.cfg.train.lambda_mix)
+
+    def draw_moving(self, count):
+        """Indices (M,) of `count` moving Gaussians drawn without replacement, or all of them
+        when there are no more."""
+        idx = torch.nonzero(self.model.moving).squeeze(1)
+        if len(idx) > count:
+            idx = idx[torch.as_tensor(self.rng.choice(len(idx), count, replace=False), device=idx.device)]
+        return idx
 
     def physics_loss(self, it, params, spec):
         """Ramped VG-LOSS-PHYS on fresh collocation points (motion parameter dict `params`),

@@ -30,11 +30,17 @@ def coefficients(params, t, z, cfg):
     return masked(mixing_weights(params, z) @ motion_patterns(params, t, cfg), cfg.mask)
 
 
+def mixing_logits(params, z):
+    """z A + c: (N, L) codes -> (N, K) logits of the mixing weights (VG-COEF; VG-LOSS-MIX takes
+    them). Unchecked, as `mixing_weights`."""
+    A, c = params["mix"][0]
+    return z @ A + c
+
+
 def mixing_weights(params, z):
     """m(z) = softmax(z A + c): (N, L) codes -> (N, K) weights (VG-COEF). Unchecked: callers
     (`coefficients`, the trajectory, the residuals) have validated z."""
-    A, c = params["mix"][0]
-    return torch.softmax(z @ A + c, dim=-1)  # [N, K]
+    return torch.softmax(mixing_logits(params, z), dim=-1)  # [N, K]
 
 
 def mixing_weights_jet(params, z, dz):
