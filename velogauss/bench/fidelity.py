@@ -108,17 +108,18 @@ _ANTIALIASED_ERA = {
     "a-freqs6": ["model.n_freqs_x=6"],
     "a-freqs8": ["model.n_freqs_x=8"],
 }
-# The mixing entropy (VG-LOSS-MIX): its weight, from the uniform start, and with a finer code
-# (section 0).
+# The mixing entropy (VG-LOSS-MIX): its weight, from the uniform start, and with a finer code;
+# and the physics losses' ablation at today's defaults (section 0).
 _MIXING_ERA = {"a-mix1e-4": ["train.lambda_mix=1e-4"], "a-mix5e-4": ["train.lambda_mix=5e-4"],
                "a-mix3e-3": ["train.lambda_mix=3e-3"], "a-mix1e-2": ["train.lambda_mix=1e-2"],
                "a-mix1e-3-uniform": ["train.lambda_mix=1e-3", "model.mixing_init=uniform"],
-               "a-mix1e-3-freqs6": ["train.lambda_mix=1e-3", "model.n_freqs_x=6"]}
-# Every variant above was recorded before model.mixing_init = "auto" started multi's patterns
-# apart (section 0b) and keeps the uniform start, so that a re-run reproduces its record (on
-# the other scenes "auto" is the uniform start: nothing changes there).
+               "a-mix1e-3-freqs6": ["train.lambda_mix=1e-3", "model.n_freqs_x=6"],
+               "a-no-gpc-mix": ["model.ablation=no-gpc"]}
+# The variants of _CLASSIC_ERA and _ANTIALIASED_ERA were recorded before model.mixing_init =
+# "auto" started multi's patterns apart (section 0b) and keep the uniform start, so that a re-run
+# reproduces its record (on the other scenes "auto" is the uniform start: nothing changes there).
 UNIFORM = ["model.mixing_init=uniform"]
-# Every variant but the mixing entropy's own was recorded before train.lambda_mix became 1e-3
+# Every variant but those of _MIXING_ERA was recorded before train.lambda_mix became 1e-3
 # (section 0) and keeps it off.
 NOMIX = ["train.lambda_mix=0"]
 # "a": today's defaults; "a-nomix", "a-uniform" and "a-classic": those of the three versions before.
