@@ -180,11 +180,11 @@ def test_step_ratio_quick(tmp_path):
     header, rows = table(body)
     assert header == ["round", "before (ms per iteration)", "after (ms per iteration)", "before / after"]
     assert len(rows) == step_ratio.QUICK_ROUNDS
-    # The two implementations agree to rounding in float64 on the training's parameters:
-    # relative 1e-12 of each value, or 1e-18 absolute for the divergence, a sum of grad v
-    # terms ~1e-3 that cancel to ~1e-12 at the start of training (rounding 1e-3 x 1e-16).
-    for name, (diff, scale) in result["agreement"].items():
-        assert diff <= 1e-12 * scale + 1e-18, (name, diff, scale)
+    # Both versions train the same iterations from the same start, and the side losses beside
+    # the renders keep the arithmetic: every trainable tensor is equal to the last bit. A lost
+    # or doubled gradient, or another order of the gradient sums, would show here.
+    assert result["agreement"] and all(diff == 0 for diff, _ in result["agreement"].values()), result["agreement"]
+    assert result["losses"][1] == pytest.approx(result["losses"][0], rel=1e-6)
 
 
 def test_a_cuda_run_adds_its_own_section_and_keeps_the_cpu_one(tmp_path):

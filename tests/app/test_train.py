@@ -4,6 +4,7 @@ detection, atomic checkpoints, exact resume and Ctrl-C."""
 import dataclasses
 import json
 import signal
+import threading
 import time
 import warnings
 
@@ -363,13 +364,14 @@ def test_adf_step_needs_a_velocity_and_an_adf(tiny_scene):
     assert model.spec.without_adf().scheme == "integrate"
 
 
-def test_collocation_near_points_stays_within_the_jitter():
-    from velogauss.train.sampling import collocation_near
+def test_collocation_draws_near_points_stay_within_the_jitter():
+    from velogauss.train.sampling import draw_near
 
     points = torch.tensor([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]])
-    x = collocation_near(points, 500, 0.01, np.random.default_rng(0))
+    index, offsets = draw_near(len(points), 500, 0.01, np.random.default_rng(0), torch.float32, "cpu")
+    x = points.index_select(0, index) + offsets
     nearest = torch.cdist(x, points).min(dim=1).values
-    assert x.shape == (500, 3) and nearest.max() < 0.06  # 6 sigma of a 3D normal, 500 draws
+    assert x.shape == (500, 3) and offsets.dtype == torch.float32 and nearest.max() < 0.06  # 6 sigma of a 3D normal
     assert (torch.cdist(x, points).argmin(dim=1) == 0).any() and (torch.cdist(x, points).argmin(dim=1) == 1).any()
 
 
@@ -384,3 +386,27 @@ def _trains_and_reloads(cfg, scene, run_dir):
         b = reloaded.render(frame.camera, frame.time, scene.background)[0]
     assert torch.isfinite(a).all() and torch.equal(a, b)
     return reloaded
+
+
+def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, tmp_path, monkeypatch):
+    # The physics, carry and mixing losses run in a worker thread beside the renders
+    # (velogauss.train.side); their draws come first and their gradients join in a fixed
+    # order, so whether a worker ran changes no number of the training.
+    from velogauss.train import side
+
+    ran_in = []
+    traced = side.side_loss
+    monkeypatch.setattr(side, "side_loss", lambda *a: (ran_in.append(threading.current_thread()), traced(*a))[1])
+    cfg = load_config(None, [*TINY, "train.threads=2"])
+    trained = {}
+    for worker in (True, False):
+        trainer, _ = loop.prepare(cfg, tiny_scene, tmp_path / str(worker))
+        assert trainer.side_worker  # two threads on the CPU: the worker
+        trainer.side_worker = worker
+        losses = [trainer.step(it) for it in range(cfg.train.warmup, cfg.train.warmup + 6)]
+        trained[worker] = ({k: v.detach().clone() for k, v in trainer.model.state_dict().items()}, losses)
+    threads = {t is threading.main_thread() for t in ran_in}
+    assert threads == {False, True}, "the side losses ran in the worker, then inline"
+    (a, loss_a), (b, loss_b) = trained[True], trained[False]
+    assert loss_a == loss_b
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

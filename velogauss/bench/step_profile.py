@@ -5,8 +5,10 @@ default scene, from iteration warmup + curriculum on: motion, ADF and full physi
 velogauss's default threads), run under cProfile; each row is the cumulative time of the
 functions that do one part of the step, per iteration. Rows nest where their functions do
 (compositing forward runs inside the render; compositing backward inside backward); the
-indented rows are parts of the row above. cProfile's own cost inflates Python-heavy parts:
-the profiled and the unprofiled iteration times are both reported.
+indented rows are parts of the row above. cProfile sees only its own thread, so the side
+losses (velogauss.train.side) run inline in the profiled iterations, as on one core; the
+iteration times are reported unprofiled with them beside the renders (the default), unprofiled
+inline, and profiled. cProfile's own cost inflates Python-heavy parts.
 
 Regenerate: python -m velogauss.bench.step_profile   (or: velogauss bench step_profile)
 Smoke test: python -m velogauss.bench.step_profile --quick --out /tmp/bench.md
@@ -29,23 +31,29 @@ PARTS = [
     ("step (`_Loop.step`)", 0, [("train/loop.py", "step")]),
     ("learning rates + frame draw", 1, [("train/optim.py", "set_learning_rates"), ("train/sampling.py", "sample")]),
     ("motion parameters (`params()`)", 1, [("model/motion.py", "params")]),
-    ("motion: Gaussians at t (`state_at`)", 1, [("model/dynamic.py", "state_at")]),
-    ("physics code z = E(γ(x0))", 2, [("motion/code.py", "physics_code")]),
-    ("coefficients of the stages", 2, [("motion/trajectory.py", "_stage_coefficients")]),
-    ("integration (rates, RK stages)", 2, [("motion/integrate.py", "integrate_schedule")]),
-    ("ADF", 2, [("motion/deform.py", "adf_residual")]),
+    ("side losses' draws (`side.draw`)", 1, [("train/side.py", "draw")]),
+    ("Gaussians at t (`state_at`: the renders' and the collocation points')", 1,
+     [("model/dynamic.py", "state_at")]),
     ("render (`rasterize`)", 1, [("velogauss_fast/raster.py", "rasterize")]),
     ("projection (VG-PROJ)", 2, [("velogauss_fast/projection.py", "project_gaussians")]),
     ("row spans (sort, culling)", 2, [("velogauss_fast/spans.py", "row_spans")]),
     ("compositing forward (numba)", 2, [("backends/numba_backend.py", "forward")]),
     ("photometric loss", 1, [("velogauss_fast/losses.py", "photometric_loss")]),
-    ("physics residuals (`motion_residuals`)", 1, [("model/motion.py", "motion_residuals")]),
-    ("mixing entropy (`mixing_loss`, VG-LOSS-MIX)", 1, [("train/loop.py", "mixing_loss")]),
-    ("backward (`loss.backward`)", 1, [("torch/_tensor.py", "backward")]),
+    ("renders' backward (`loss.backward`)", 1, [("torch/_tensor.py", "backward")]),
     ("compositing backward (numba)", 2, [("backends/numba_backend.py", "backward")]),
+    ("side losses (`side_loss`, inline here)", 1, [("train/side.py", "side_loss")]),
+    ("collocation points' state (`collocation_near`, in the row of `state_at` too)", 2,
+     [("train/side.py", "collocation_near")]),
+    ("physics residuals (`motion_residuals`)", 2, [("model/motion.py", "motion_residuals")]),
+    ("mixing entropy (VG-LOSS-MIX, after its code pass)", 2, [("velogauss_fast/losses.py", "mixing_entropy_loss")]),
+    ("side losses' backward (`autograd.grad`)", 2, [("torch/autograd/__init__.py", "grad")]),
     ("density statistics", 1, [("train/densify.py", "add")]),
     ("optimizer (Adam step)", 1, [("torch/optim/adam.py", "step")]),
     ("PSNR of the view (host sync)", 1, [("velogauss_fast/metrics.py", "psnr")]),
+    ("motion, all calls: physics code z = E(γ(x0))", 1, [("motion/code.py", "physics_code")]),
+    ("motion, all calls: coefficients of the stages", 1, [("motion/trajectory.py", "_stage_coefficients")]),
+    ("motion, all calls: integration (rates, RK stages)", 1, [("motion/integrate.py", "integrate_schedule")]),
+    ("motion, all calls: ADF", 1, [("motion/deform.py", "adf_residual")]),
     ("density control etc. (`maintain`)", 0, [("train/loop.py", "maintain")]),
     ("argument checks (`check_array`, `check_finite`, `check_time`)", 0,
      [("velogauss_fast/checks.py", "check_array"), ("velogauss_fast/checks.py", "check_finite"),
@@ -64,31 +72,38 @@ def _cumulative(stats, suffix, name):
 
 
 def measure(iterations, quick=False):
-    """{"unprofiled_s", "profiled_s", "rows": [(label, indent, s per iteration, calls per iteration)], "gaussians"}."""
-    from velogauss.bench.load import make_default_scene, training_pass
+    """{"unprofiled_s", "inline_s" (side losses inline), "profiled_s" (inline too), "rows": [(label, indent, s per iteration, calls per iteration)], "gaussians"}."""
+    from velogauss.bench.load import make_default_scene, training_loop
 
     with tempfile.TemporaryDirectory(prefix="velogauss-profile-") as tmp:
         scene = make_default_scene(Path(tmp) / "scene", quick)
-        one_pass, n = training_pass(scene, 0)
-        for _ in range(2):
-            one_pass()
-        t0 = time.perf_counter()
-        for _ in range(iterations):
-            one_pass()
-        unprofiled = (time.perf_counter() - t0) / iterations
+        loop, first = training_loop(scene, 0)
+        iteration = iter(range(first, first + 2 + 3 * iterations))
+
+        def seconds_per_iteration(count):
+            start = time.perf_counter()
+            for _ in range(count):
+                it = next(iteration)
+                loop.step(it)
+                loop.maintain(it + 1)
+            return (time.perf_counter() - start) / count
+
+        seconds_per_iteration(2)
+        unprofiled = seconds_per_iteration(iterations)
+        # cProfile sees only the thread that enabled it: the side losses run inline from here on.
+        loop.side_worker = False
+        inline = seconds_per_iteration(iterations)
         profiler = cProfile.Profile()
-        t0 = time.perf_counter()
         profiler.enable()
-        for _ in range(iterations):
-            one_pass()
+        profiled = seconds_per_iteration(iterations)
         profiler.disable()
-        profiled = (time.perf_counter() - t0) / iterations
     stats = pstats.Stats(profiler)
     rows = []
     for label, indent, functions in PARTS:
         found = [_cumulative(stats, suffix, name) for suffix, name in functions]
         rows.append((label, indent, sum(s for s, _ in found) / iterations, sum(c for _, c in found) / iterations))
-    return {"unprofiled_s": unprofiled, "profiled_s": profiled, "rows": rows, "gaussians": n}
+    return {"unprofiled_s": unprofiled, "inline_s": inline, "profiled_s": profiled, "rows": rows,
+            "gaussians": len(loop.model.gaussians)}
 
 
 def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=False):
@@ -111,8 +126,9 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=F
         f"({result['gaussians']} Gaussians; motion, ADF and full physics loss on; velogauss's default threads), "
         "cumulative time per iteration of the functions doing each part. Indented rows are parts of the row "
         "above; a row's remainder is the Python and torch work between them. Iteration time: "
-        f"{1e3 * result['unprofiled_s']:.1f} ms unprofiled, {1e3 * result['profiled_s']:.1f} ms profiled "
-        "(cProfile's cost inflates Python-heavy rows).",
+        f"{1e3 * result['unprofiled_s']:.1f} ms unprofiled with the side losses beside the renders (the default), "
+        f"{1e3 * result['inline_s']:.1f} ms unprofiled with them inline, {1e3 * result['profiled_s']:.1f} ms "
+        "profiled (inline: cProfile sees one thread; its cost inflates Python-heavy rows).",
     ], regenerate_command(COMMAND, *options, quick=quick), lines)
     return result
 

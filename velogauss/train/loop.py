@@ -8,6 +8,8 @@ Per iteration (velogauss.config holds every number):
 3. loss = photometric (VG-LOSS, the mean over the views) + ramped physics loss (VG-LOSS-PHYS) on collocation
    points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual)
    + the mixing weights' entropy (VG-LOSS-MIX: each particle commits to one motion pattern);
+   the losses no render goes through (physics, VG-LOSS-CARRY, mixing) run in a worker thread
+   beside the renders (velogauss.train.side);
 4. Adam step with the scheduled learning rates; density statistics; every
    `densify.every` iterations clone/split/prune, opacity resets (each followed by at least a
    reset period of training), static-particle detection.
@@ -35,19 +37,17 @@ from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
 from velogauss.model.build import profile_from_dict
 from velogauss.model.dynamic import render_gaussians
-from velogauss.model.motion import carry_loss, motion_residuals
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.frequency import start_frequency
 from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
-from velogauss.train.sampling import FrameSampler, camera_extent, collocation_near, collocation_points
+from velogauss.train import side
+from velogauss.train.sampling import FrameSampler, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
-from velogauss_fast.losses import mixing_entropy_loss, photometric_loss, physics_loss
+from velogauss_fast.losses import photometric_loss
 from velogauss_fast.metrics import psnr
-from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.coefficients import mixing_logits
 from velogauss_core.constants import STATIC_MOTION_PX
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
@@ -99,7 +99,7 @@ def prepare(cfg, data, run_dir, resume=False):
     scene profile's patterns, on resume to the run's own values; `loop.cfg` and config.toml
     hold the numbers used.
     """
-    apply_threads(cfg.train.threads)
+    _, parallel = apply_threads(cfg.train.threads)
     check_trainable_size(data)
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
@@ -142,14 +142,19 @@ def prepare(cfg, data, run_dir, resume=False):
     if resume:
         optimizer.load_state_dict(payload["optimizer"])
         stats.load_state_dict(payload["density"])
-    return _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device), start
+    # The side losses go to a worker thread where the thread budget allows two parallel parts
+    # (the compositing's); measured on the CPU only, so elsewhere they run inline.
+    side_worker = parallel >= 2 and device.type == "cpu"
+    return _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device, side_worker), start
 
 
 class _Loop:
     """The state of one training run between iterations."""
 
-    def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device):
+    def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device,
+                 side_worker=False):
         self.cfg, self.data, self.run_dir = cfg, data, run_dir
+        self.side_worker = side_worker  # velogauss.train.side: the side losses beside the renders
         self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile
         self.rng, self.extent, self.extra, self.device = rng, extent, extra, device
         # What the motion computes and which losses are on, resolved once when the model was built.
@@ -198,7 +203,10 @@ class _Loop:
             bar.close()
 
     def step(self, it):
-        """One optimisation step; returns (loss, PSNR of the first rendered view)."""
+        """One optimisation step; returns (loss, PSNR of the first rendered view).
+
+        The side losses (physics, carry, mixing: velogauss.train.side) are drawn first and
+        computed beside the renders; their gradients join the renders' after its backward."""
         cfg, model = self.cfg, self.model
         set_learning_rates(self.optimizer, it, cfg.train, self.extent)
         indices = self.sampler.sample_views(it, self.rng, cfg.train.views)
@@ -208,27 +216,15 @@ class _Loop:
         params = None
         if spec.moving:
             self.freeze_motion(it)
-            params = model.motion.params()  # once per step: the render and the physics loss share it
-        # One state for all the views: they show the same time (sample_views).
-        means, quats, scales, base = model.state_at(frames[0].time, params, spec, self.carry_offset(it, spec))
-        gaussians = model.with_appearance(means, quats, scales)
-        renders, loss = [], 0.0
-        for frame, index in zip(frames, indices):
-            image, _, meta = render_gaussians(gaussians, frame.camera, self.background)
-            if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
-                meta["mean2d"].retain_grad()
-            loss = loss + photometric_loss(image, self.images[index]) / len(frames)
-            renders.append((image, meta, frame.camera))
-        if motion_on and self.spec.adf_loss:
-            loss = loss + cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
-        if motion_on and spec.physics_loss:
-            loss = loss + self.physics_loss(it, params, spec)
-        if motion_on and spec.carry_loss and cfg.train.lambda_carry > 0:
-            loss = loss + cfg.train.lambda_carry * self.carry_loss(it, params, spec)
-        if motion_on and spec.velocity == "affine" and cfg.train.lambda_mix > 0:
-            loss = loss + self.mixing_loss(params)
+            params = model.motion.params()  # once per step: the render and the side losses share it
+        offset = self.carry_offset(it, spec)
         self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
+        pending = side.start(model, self.cfg, params, spec, side.draw(self, it, spec), self.side_worker)
+        try:
+            loss, renders = self.render_loss(frames, indices, params, spec, offset, motion_on)
+            loss.backward()
+        finally:
+            side_value = side.finish(pending)  # waits for the worker even when the renders raised
         for _, meta, camera in renders:
             grad = meta["mean2d"].grad
             if grad is not None:
@@ -240,7 +236,24 @@ class _Loop:
         with torch.no_grad():
             image = renders[0][0]
             frame_psnr = float(psnr(image.detach().clamp(0, 1), self.images[indices[0]]))
-        return float(loss.detach()), frame_psnr
+        return float(loss.detach()) + side_value, frame_psnr
+
+    def render_loss(self, frames, indices, params, spec, offset, motion_on):
+        """(photometric loss over the views + the ADF's lambda_adf · mean |Δx|², [(image,
+        meta, camera)] of each view): one state for all the views, which show one time."""
+        model = self.model
+        means, quats, scales, base = model.state_at(frames[0].time, params, spec, offset)
+        gaussians = model.with_appearance(means, quats, scales)
+        renders, loss = [], 0.0
+        for frame, index in zip(frames, indices):
+            image, _, meta = render_gaussians(gaussians, frame.camera, self.background)
+            if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
+                meta["mean2d"].retain_grad()
+            loss = loss + photometric_loss(image, self.images[index]) / len(frames)
+            renders.append((image, meta, frame.camera))
+        if motion_on and self.spec.adf_loss:
+            loss = loss + self.cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
+        return loss, renders
 
     def spec_at(self, it):
         """The model's spec at iteration `it`: without the ADF before `adf_start` (its last
@@ -269,53 +282,6 @@ class _Loop:
         if spec.scheme != "adf-step" or it < self.cfg.train.warmup:
             return 0.0
         return spec.carry_offset * (1.0 if self.rng.random() < 0.5 else -1.0)
-
-    def carry_loss(self, it, params, spec):
-        """VG-LOSS-CARRY on up to `carry_points` moving Gaussians, between two times of the
-        window opened so far (the ADF has seen no frame after it): t uniform in it, t_a up
-        to `carry_horizon` away on either side."""
-        t_cfg, g = self.cfg.train, self.model.gaussians
-        window = self.sampler.window(it)
-        t = float(self.rng.uniform(0.0, window))
-        t_a = float(np.clip(t + self.rng.uniform(-t_cfg.carry_horizon, t_cfg.carry_horizon), 0.0, window))
-        idx = self.draw_moving(t_cfg.carry_points)
-        x0, q0, s0 = (v.detach().index_select(0, idx) for v in (g.means, g.quats, g.scales))
-        return carry_loss(params, spec, x0, q0, s0, t_a, t)
-
-    def mixing_loss(self, params):
-        """VG-LOSS-MIX on up to `mix_points` moving Gaussians' canonical means (detached: the
-        entropy shapes the code and mixing networks, it does not move the Gaussians)."""
-        x0 = self.model.gaussians.means.detach().index_select(0, self.draw_moving(self.cfg.train.mix_points))
-        z = physics_code(params, x0, self.model.motion.spec.config)
-        return mixing_entropy_loss(mixing_logits(params, z), self.cfg.train.lambda_mix)
-
-    def draw_moving(self, count):
-        """Indices (M,) of `count` moving Gaussians drawn without replacement, or all of them
-        when there are no more."""
-        idx = torch.nonzero(self.model.moving).squeeze(1)
-        if len(idx) > count:
-            idx = idx[torch.as_tensor(self.rng.choice(len(idx), count, replace=False), device=idx.device)]
-        return idx
-
-    def physics_loss(self, it, params, spec):
-        """Ramped VG-LOSS-PHYS on fresh collocation points (motion parameter dict `params`),
-        uniform in the grown box or, with physics.placement "gaussians", near the moving
-        Gaussians at the collocation time."""
-        p = self.cfg.physics
-        ramp = min(1.0, (it - self.cfg.train.warmup + 1) / max(1, p.ramp))
-        x, t = collocation_points(self.data.bounds, p.bounds_margin, p.n_points, self.rng, torch.float32, self.device)
-        if p.placement == "gaussians" and bool(self.model.moving.any()):  # else the box: nothing to be near
-            x = self.collocation_near_gaussians(t, params, spec)
-        r, div = motion_residuals(params, spec, x, t)
-        return physics_loss(r, div, ramp * p.lambda_transport, ramp * p.lambda_div)
-
-    def collocation_near_gaussians(self, t, params, spec):
-        """Collocation points near the moving Gaussians' means at time t (placement "gaussians")."""
-        lo, hi = (np.asarray(b, dtype=np.float64) for b in self.data.bounds)
-        with torch.no_grad():
-            means = self.model.state_at(t, params, spec)[0][self.model.moving]
-        return collocation_near(means, self.cfg.physics.n_points,
-                                self.cfg.physics.jitter * float(np.linalg.norm(hi - lo)), self.rng)
 
     def maintain(self, done):
         """Density control, opacity resets and static detection due after `done` iterations

@@ -61,14 +61,15 @@ def collocation_points(bounds, margin, n_points, rng, dtype, device):
     return torch.as_tensor(x, dtype=dtype, device=device), float(rng.uniform(0.0, 1.0))
 
 
-def collocation_near(points, n_points, jitter, rng):
-    """x (n_points, 3): `n_points` of `points (M, 3)` (tensor, M >= 1) drawn with replacement,
-    each moved by an isotropic normal offset of standard deviation `jitter` (world units).
-    Placement "gaussians" of VG-LOSS-PHYS: the residual binds where the particles are at the
-    collocation time, not in the empty corners of the box."""
-    index = torch.as_tensor(rng.integers(0, len(points), size=n_points), device=points.device)
-    noise = torch.as_tensor(rng.standard_normal((n_points, 3)) * jitter, dtype=points.dtype, device=points.device)
-    return points.index_select(0, index) + noise
+def draw_near(count, n_points, jitter, rng, dtype, device):
+    """(index (n_points,) int64 into `count` >= 1 points, drawn with replacement; offsets
+    (n_points, 3) of `dtype`, isotropic normal of standard deviation `jitter` (world units)).
+    Placement "gaussians" of VG-LOSS-PHYS: the collocation points are the drawn Gaussians'
+    means at the collocation time plus the offsets, so the residual binds where the particles
+    are, not in the empty corners of the box."""
+    index = torch.as_tensor(rng.integers(0, count, size=n_points), device=device)
+    offsets = torch.as_tensor(rng.standard_normal((n_points, 3)) * jitter, dtype=dtype, device=device)
+    return index, offsets
 
 
 def camera_extent(cameras):
