@@ -12,14 +12,15 @@ from velogauss_core.constants import LAMBDA_DSSIM
 from velogauss_core.checks import check_weight
 
 
-def photometric_loss(pred, gt):
+def photometric_loss(pred, gt, target=None):
     """(1 - LAMBDA_DSSIM) mean|pred - gt| + LAMBDA_DSSIM (1 - SSIM(pred, gt)) (VG-LOSS).
 
     pred, gt: (H, W, 3) tensors with H, W >= SSIM_WINDOW; SSIM as in
-    `velogauss_fast.metrics.ssim`. The L1 term passes a zero gradient where pred == gt.
+    `velogauss_fast.metrics.ssim`, with `target` = `ssim_target(gt)` when the caller keeps
+    it (the same numbers). The L1 term passes a zero gradient where pred == gt.
     Bad input raises ValueError naming the argument.
     """
-    d_ssim = 1.0 - ssim(pred, gt)  # validates pred and gt first
+    d_ssim = 1.0 - ssim(pred, gt, target)  # validates pred and gt first
     return (1.0 - LAMBDA_DSSIM) * (pred - gt).abs().mean() + LAMBDA_DSSIM * d_ssim
 
 

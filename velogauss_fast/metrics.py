@@ -2,12 +2,13 @@
 
 spec/losses_metrics.md, VG-METRIC, VG-METRIC-SSIM, VG-METRIC-LPIPS. Images are H x W x 3
 tensors in [0, 1]; results are 0-d tensors in the inputs' dtype and on their device.
-SSIM is in the training loop (VG-LOSS): two depthwise 1D convolutions over the five maps
-x, y, x^2, y^2, xy of each channel. LPIPS builds its network from the `.npz` weights once per
+SSIM is in the training loop (VG-LOSS): two depthwise 1D convolutions over the maps x, x^2,
+xy of each channel, and once per training image over y, y^2 (`ssim_target`). LPIPS builds its network from the `.npz` weights once per
 (net, weights file, device, dtype) and keeps it.
 """
 
 import functools
+from typing import NamedTuple
 
 import torch
 import torch.nn.functional as F
@@ -30,35 +31,72 @@ def psnr(pred, gt):
     return 10.0 * torch.log10(1.0 / mse.clamp_min(PSNR_MSE_FLOOR))
 
 
-def ssim(pred, gt):
+class SSIMTarget(NamedTuple):
+    """What SSIM needs of the ground truth `gt (H, W, 3)` (`ssim_target`): its channel means
+    (3, 1, 1) and the window's statistics of it centred on them, mu_y and y^2, (3, H - 10, W - 10)."""
+
+    gt: torch.Tensor
+    mean: torch.Tensor
+    mu: torch.Tensor
+    sq: torch.Tensor
+
+
+def ssim_target(gt):
+    """The ground truth's half of SSIM (VG-METRIC-SSIM), computed once for a training image
+    that many steps compare with: `ssim(pred, gt, ssim_target(gt))` equals `ssim(pred, gt)` to
+    the last bit (each depthwise convolution channel is computed on its own). gt: (H, W, 3),
+    H, W >= SSIM_WINDOW (a gt that requires grad keeps its graph in the target)."""
+    check_image_pair(gt, gt, min_size=SSIM_WINDOW, why="the SSIM window")
+    return _target(gt)
+
+
+def _target(gt):
+    """`ssim_target` of a checked gt."""
+    mean = gt.detach().mean((0, 1))[:, None, None]  # a constant shift: see `ssim`
+    y = gt.permute(2, 0, 1) - mean
+    mu, sq = _window_statistics(torch.cat([y, y * y]), gt).split(3)
+    return SSIMTarget(gt, mean, mu, sq)
+
+
+def ssim(pred, gt, target=None):
     """Mean structural similarity over channels and valid pixels (VG-METRIC-SSIM).
 
     pred, gt: (H, W, 3) with H, W >= SSIM_WINDOW. The statistics of
     `velogauss_ref.metrics.ssim` (11 x 11 Gaussian window, sigma 1.5, valid region,
     population variances), the window applied as a column then a row convolution.
-    Differentiable; smaller images, mismatched shapes or non-finite values raise
-    ValueError naming the argument.
+    target: `ssim_target(gt)`, when the caller keeps it (the training loop, per image); None
+    computes it here. Differentiable in pred; smaller images, mismatched shapes or non-finite
+    values raise ValueError naming the argument.
     """
     check_image_pair(pred, gt, min_size=SSIM_WINDOW, why="the SSIM window")
-    g = torch.as_tensor(gaussian_window(), dtype=pred.dtype, device=pred.device)
+    if target is None:
+        target = _target(gt)
+    elif target.gt is not gt:
+        raise ValueError("target: expected ssim_target(gt) of this gt")
     # Variances and covariance are invariant under a constant shift of x or y, and the
     # form E[x^2] - mu^2 cancels catastrophically in float32 (flat regions came out 1e-4
     # off in SSIM, the error divided by C2 = 9e-4): centre each channel on its mean first,
     # and add the means back to mu. The shift is a constant of the formula, hence detached.
-    x_mean, y_mean = pred.detach().mean((0, 1))[:, None, None], gt.detach().mean((0, 1))[:, None, None]
-    x, y = pred.permute(2, 0, 1) - x_mean, gt.permute(2, 0, 1) - y_mean  # (3, H, W)
-    maps = torch.cat([x, y, x * x, y * y, x * y])[None]  # (1, 15, H, W)
-    # One depthwise (grouped) convolution per direction: on the CPU, forward and backward,
-    # about 20x faster at 400 x 400 than the same filter over a batch of single channels.
-    n = maps.shape[1]
-    stats = F.conv2d(F.conv2d(maps, g.view(1, 1, -1, 1).expand(n, 1, -1, 1), groups=n),
-                     g.view(1, 1, 1, -1).expand(n, 1, 1, -1), groups=n)[0]
-    mu_x, mu_y, xx, yy, xy = stats.split(3)  # statistics of the centred images
+    x_mean, y_mean = pred.detach().mean((0, 1))[:, None, None], target.mean
+    x, y = pred.permute(2, 0, 1) - x_mean, target.gt.permute(2, 0, 1) - y_mean  # (3, H, W)
+    mu_x, xx, xy = _window_statistics(torch.cat([x, x * x, x * y]), pred).split(3)  # of the centred images
+    mu_y, yy = target.mu, target.sq
     var_x, var_y, cov_xy = xx - mu_x * mu_x, yy - mu_y * mu_y, xy - mu_x * mu_y
     mu_x, mu_y = mu_x + x_mean, mu_y + y_mean
     c1, c2 = SSIM_K1**2, SSIM_K2**2
     ssim_map = ((2 * mu_x * mu_y + c1) * (2 * cov_xy + c2)) / ((mu_x**2 + mu_y**2 + c1) * (var_x + var_y + c2))
     return ssim_map.mean()
+
+
+def _window_statistics(maps, like):
+    """The Gaussian window's correlation over the valid region of each map of `maps (C, H, W)`
+    -> (C, H - 10, W - 10), in `like`'s dtype and device. One depthwise (grouped) convolution
+    per direction: on the CPU, forward and backward, about 20x faster at 400 x 400 than the
+    same filter over a batch of single channels."""
+    g = torch.as_tensor(gaussian_window(), dtype=like.dtype, device=like.device)
+    n = maps.shape[0]
+    return F.conv2d(F.conv2d(maps[None], g.view(1, 1, -1, 1).expand(n, 1, -1, 1), groups=n),
+                    g.view(1, 1, 1, -1).expand(n, 1, 1, -1), groups=n)[0]
 
 
 def lpips(pred, gt, net="alex", weights_dir=None):

@@ -203,3 +203,39 @@ def test_lpips_without_weights_names_the_folder(tmp_path):
 def test_bad_input_names_the_argument(fn, pred, gt, kwargs, name):
     with pytest.raises(ValueError, match=f"^{name}:"):
         fn(pred, gt, **kwargs)
+
+
+@pytest.mark.spec("VG-METRIC-SSIM")
+def test_ssim_with_a_kept_target_is_the_five_map_convolution_to_the_last_bit(device):
+    # The training loop computes each image's half of SSIM once (ssim_target) and convolves
+    # only x, x^2, xy per step. The value and pred's gradient must be those of the five maps
+    # x, y, x^2, y^2, xy in one depthwise convolution (the form before the split), bit for
+    # bit, or every recorded training changes.
+    from velogauss_core.constants import SSIM_K1, SSIM_K2
+    from velogauss_core.windows import gaussian_window
+
+    def five_maps(p, gt):
+        g = torch.as_tensor(gaussian_window(), dtype=p.dtype, device=p.device)
+        x_mean, y_mean = p.detach().mean((0, 1))[:, None, None], gt.mean((0, 1))[:, None, None]
+        x, y = p.permute(2, 0, 1) - x_mean, gt.permute(2, 0, 1) - y_mean
+        maps = torch.cat([x, y, x * x, y * y, x * y])[None]
+        col, row = g.view(1, 1, -1, 1).expand(15, 1, -1, 1), g.view(1, 1, 1, -1).expand(15, 1, 1, -1)
+        mu_x, mu_y, xx, yy, xy = torch.nn.functional.conv2d(torch.nn.functional.conv2d(maps, col, groups=15), row,
+                                                            groups=15)[0].split(3)
+        var_x, var_y, cov = xx - mu_x * mu_x, yy - mu_y * mu_y, xy - mu_x * mu_y
+        mu_x, mu_y = mu_x + x_mean, mu_y + y_mean
+        c1, c2 = SSIM_K1**2, SSIM_K2**2
+        return (((2 * mu_x * mu_y + c1) * (2 * cov + c2)) / ((mu_x**2 + mu_y**2 + c1) * (var_x + var_y + c2))).mean()
+
+    pred, gt = (torch.as_tensor(a, dtype=torch.float32, device=device) for a in image_pair(3, 40, 52))
+    target = metrics.ssim_target(gt)
+    results = []
+    for fn in (five_maps, lambda p, gt: metrics.ssim(p, gt, target), metrics.ssim):
+        p = pred.clone().requires_grad_()
+        value = fn(p, gt)
+        value.backward()
+        results.append((value.detach(), p.grad))
+    for value, grad in results[1:]:
+        assert torch.equal(value, results[0][0]) and torch.equal(grad, results[0][1])
+    with pytest.raises(ValueError, match="target"):
+        metrics.ssim(pred, gt.clone(), target)

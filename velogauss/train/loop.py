@@ -47,7 +47,7 @@ from velogauss.train import side
 from velogauss.train.sampling import FrameSampler, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.losses import photometric_loss
-from velogauss_fast.metrics import psnr
+from velogauss_fast.metrics import psnr, ssim_target
 from velogauss_core.constants import STATIC_MOTION_PX
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
@@ -160,6 +160,8 @@ class _Loop:
         # What the motion computes and which losses are on, resolved once when the model was built.
         self.spec = model.spec
         self.images = [torch.as_tensor(f.image, device=device) for f in data.train]
+        # Each training image's half of SSIM, once: every step compares renders with them.
+        self.ssim_targets = [ssim_target(image) for image in self.images]
         # The distinct training cameras (multi-view video repeats each pose at every time).
         self.cameras = list({(f.camera.viewmat.tobytes(), f.camera.K.tobytes()): f.camera for f in data.train}.values())
         self.sampler = FrameSampler([f.time for f in data.train], cfg.train.warmup, cfg.train.curriculum,
@@ -249,7 +251,7 @@ class _Loop:
             image, _, meta = render_gaussians(gaussians, frame.camera, self.background)
             if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
                 meta["mean2d"].retain_grad()
-            loss = loss + photometric_loss(image, self.images[index]) / len(frames)
+            loss = loss + photometric_loss(image, self.images[index], self.ssim_targets[index]) / len(frames)
             renders.append((image, meta, frame.camera))
         if motion_on and self.spec.adf_loss:
             loss = loss + self.cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
