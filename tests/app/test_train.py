@@ -397,11 +397,14 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     ran_in = []
     traced = side.side_loss
     monkeypatch.setattr(side, "side_loss", lambda *a: (ran_in.append(threading.current_thread()), traced(*a))[1])
-    cfg = load_config(None, [*TINY, "train.threads=2"])
+    # The default threads with a budget of two (OMP_NUM_THREADS): one torch thread, as every
+    # test has, and two compositing threads, so the worker (torch's own count stays 1 here).
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    cfg = load_config(None, TINY)
     trained = {}
     for worker in (True, False):
         trainer, _ = loop.prepare(cfg, tiny_scene, tmp_path / str(worker))
-        assert trainer.side_worker  # two threads on the CPU: the worker
+        assert trainer.side_worker
         trainer.side_worker = worker
         losses = [trainer.step(it) for it in range(cfg.train.warmup, cfg.train.warmup + 6)]
         trained[worker] = ({k: v.detach().clone() for k, v in trainer.model.state_dict().items()}, losses)
@@ -410,3 +413,8 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     (a, loss_a), (b, loss_b) = trained[True], trained[False]
     assert loss_a == loss_b
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_one_thread_computes_the_side_losses_inline(tiny_scene, tmp_path):
+    trainer, _ = loop.prepare(load_config(None, [*TINY, "train.threads=1"]), tiny_scene, tmp_path)
+    assert not trainer.side_worker
