@@ -152,7 +152,7 @@ class _Loop:
     """The state of one training run between iterations."""
 
     def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device,
-                 side_worker=False):
+                 side_worker):
         self.cfg, self.data, self.run_dir = cfg, data, run_dir
         self.side_worker = side_worker  # velogauss.train.side: the side losses beside the renders
         self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile

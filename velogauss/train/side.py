@@ -81,6 +81,8 @@ def draw(loop, it, spec):
     if motion_on and spec.physics_loss:
         p = cfg.physics
         ramp = min(1.0, (it - cfg.train.warmup + 1) / max(1, p.ramp))
+        # Drawn under either placement: it gives t, and the box points drawn first keep every
+        # recorded run's random stream (near the Gaussians they are then not used).
         x, t = collocation_points(loop.data.bounds, p.bounds_margin, p.n_points, loop.rng, torch.float32, loop.device)
         physics = PhysicsDraw(ramp, t, x, None, None)
         if p.placement == "gaussians" and bool(model.moving.any()):  # else the box: nothing to be near
