@@ -173,25 +173,35 @@ def rasterize(
 
         return rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height,
                                 background, sh_degree, mode)
+    prepare = None
+    if backend == "numba" and not (viewmat.requires_grad or K.requires_grad):
+        from velogauss_fast.backends.numba_projection import prepare_numba as prepare
     return render_with_composite(means, quats, scales, opacities, colors, viewmat, K, width, height, background,
-                                 sh_degree, COMPOSITES[backend], mode)
+                                 sh_degree, COMPOSITES[backend], mode, prepare)
 
 
 def render_with_composite(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree,
-                          composite, mode="classic"):
+                          composite, mode="classic", prepare=None):
     """`rasterize` on validated input with one of the COMPOSITES (the benchmark times each
-    through this one pipeline)."""
-    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height, dilation(mode))
-    if sh_degree is None:
-        rgb = colors
-    else:
-        rgb = sh_to_color(colors, viewing_directions(means, viewmat), sh_degree)
-    opacities = splat_opacities(opacities, proj["compensation"], mode)
+    through this one pipeline) after `prepare` (None: `prepare_torch`; or the numba
+    backend's `prepare_numba`)."""
+    prepare = prepare_torch if prepare is None else prepare
+    proj, rgb, opacities = prepare(means, quats, scales, opacities, colors, viewmat, K, width, height, sh_degree,
+                                   mode)
     spans = row_spans(proj["mean2d"], proj["conic"], opacities, proj["radius"], proj["depth"], proj["valid"],
                       width, height)
     image, T = composite(proj["mean2d"], proj["conic"], opacities, rgb, background, spans)
     meta = dict(proj, colors=rgb, n_pairs=spans.n_box)
     return image.reshape(height, width, 3), (1 - T).reshape(height, width, 1), meta
+
+
+def prepare_torch(means, quats, scales, opacities, colors, viewmat, K, width, height, sh_degree, mode):
+    """A view's VG-COV, VG-PROJ and VG-SH in torch operations: (VG-PROJ dict, rgb (N, 3),
+    opacities (N,) as composited under `mode`). colors: (N, 3) RGB when sh_degree is None,
+    else (N, K, 3) SH coefficients."""
+    proj = project_gaussians(means, covariance_3d(quats, scales), viewmat, K, width, height, dilation(mode))
+    rgb = colors if sh_degree is None else sh_to_color(colors, viewing_directions(means, viewmat), sh_degree)
+    return proj, rgb, splat_opacities(opacities, proj["compensation"], mode)
 
 
 def _composite_torch(mean2d, conic, opacity, rgb, background, spans):
