@@ -17,10 +17,10 @@ from velogauss_core.constants import (
 )
 from velogauss_core.checks import check_size, check_variance
 
-# Radii are capped here before the integer cast: a splat wider than this covers any
-# image we can allocate, and the cap keeps absurd covariances (float32 overflow in
-# lambda_max) from turning into undefined integer casts.
-_RADIUS_CAP = float(2**40)
+# Radii are capped here (and in the numba backend's kernels) before the integer cast: a
+# splat wider than this covers any image we can allocate, and the cap keeps absurd
+# covariances (float32 overflow in lambda_max) from turning into undefined integer casts.
+RADIUS_CAP = float(2**40)
 
 
 def project_gaussians(means, Sigma, viewmat, K, width, height, eps2d=EPS2D):
@@ -111,4 +111,4 @@ def _radius(cov2d):
     b = 0.5 * (s00 + s11)
     lam = b + torch.sqrt(torch.clamp(b * b - det, min=EIGEN_DISCRIMINANT_FLOOR))
     r = torch.ceil(GAUSSIAN_EXTENT_SIGMA * torch.sqrt(torch.clamp(lam, min=0.0)))
-    return torch.nan_to_num(r, nan=0.0, posinf=_RADIUS_CAP).clamp(max=_RADIUS_CAP).to(torch.int64)
+    return torch.nan_to_num(r, nan=0.0, posinf=RADIUS_CAP).clamp(max=RADIUS_CAP).to(torch.int64)

@@ -9,7 +9,9 @@ composite those pairs (a third, gsplat, lives in backends/gsplat_backend.py):
 
 * "numba" (CPU; backends/numba_backend.py): compiled kernels walk the Gaussians in depth
   order and each one's row spans, keeping a running T per pixel; the backward walks
-  them in reverse. No pair table, no sort; float64 throughout.
+  them in reverse. No pair table, no sort; float64 throughout. Each view's VG-COV,
+  VG-PROJ and VG-SH run in compiled kernels too (backends/numba_projection.py, `prepare_numba`),
+  unless the camera needs a gradient, which they do not give.
 * "torch" (any device; the pair table in `velogauss_fast.spans`, the compositing and its
   backward in `velogauss_fast.composite`): the pairs are listed with vectorised index
   arithmetic (one record per Gaussian and box row), sorted once by (pixel, depth), and

@@ -1,8 +1,8 @@
 """Compiled CPU compositing for `velogauss_fast.raster.rasterize` (backend="numba").
 
-Projection, culling, colours and the row spans are the torch backend's own; only the
-compositing of VG-RENDER's pairs runs in the kernels of `numba_kernels`, forward and an
-analytic backward. No pair table is built: backward revisits the pairs through the
+Each view's projection, covariance, colours and culling run in `numba_projection`; the
+row spans are the torch backend's own; the compositing of VG-RENDER's pairs runs in the
+kernels of `numba_kernels`, forward and an analytic backward. No pair table is built: backward revisits the pairs through the
 same row spans and saves, per pixel, the final T and the rank of the last blended
 Gaussian and, per pair, its alpha (one float64 in visiting order, so the backward needs no
 exp). The kernels compute in float64 whatever the working dtype (inputs are cast up,

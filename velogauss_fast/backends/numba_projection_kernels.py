@@ -28,15 +28,9 @@ from velogauss_core.constants import (
     NEAR_PLANE,
     QUAT_ZERO_NORM_SQ,
 )
+from velogauss_fast.projection import RADIUS_CAP
+from velogauss_fast.sh import C0, C1, C2, C3
 
-# velogauss_fast.projection's cap on radii before the integer cast.
-RADIUS_CAP = float(2**40)
-# Real SH constants of 3DGS (velogauss_fast.sh).
-C0 = 0.28209479177387814
-C1 = 0.4886025119029199
-C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 N_BASIS = 16  # (3 + 1)^2, the basis of the highest degree
 
 # As numba_kernels: no Python division checks (every division is by a tested or stand-in
