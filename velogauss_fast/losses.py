@@ -4,23 +4,41 @@ spec/losses_metrics.md, VG-LOSS, VG-LOSS-PHYS and VG-LOSS-MIX. Results are 0-d t
 dtype and on their device.
 """
 
+from typing import Literal
+
 import torch
 
+from velogauss_fast.backends import numba_available
 from velogauss_fast.checks import check_array
-from velogauss_fast.metrics import ssim
+from velogauss_fast.metrics import checked_target, ssim
 from velogauss_core.constants import LAMBDA_DSSIM
 from velogauss_core.checks import check_weight
 
 
-def photometric_loss(pred, gt, target=None):
+def photometric_loss(pred, gt, target=None, backend: Literal["auto", "torch", "numba"] = "auto"):
     """(1 - LAMBDA_DSSIM) mean|pred - gt| + LAMBDA_DSSIM (1 - SSIM(pred, gt)) (VG-LOSS).
 
     pred, gt: (H, W, 3) tensors with H, W >= SSIM_WINDOW; SSIM as in
     `velogauss_fast.metrics.ssim`, with `target` = `ssim_target(gt)` when the caller keeps
     it (the same numbers). The L1 term passes a zero gradient where pred == gt.
+    backend: "torch" (the formula above in torch operations, any device), "numba" (value and
+    gradient in one compiled pass, `backends.numba_photometric`; CPU, and no gradient to gt)
+    or "auto": numba where it can run (CPU tensors, numba installed, gt without a gradient),
+    else torch. The two differ by rounding only: numba works in float64 throughout.
     Bad input raises ValueError naming the argument.
     """
-    d_ssim = 1.0 - ssim(pred, gt, target)  # validates pred and gt first
+    if backend not in ("auto", "torch", "numba"):
+        raise ValueError(f"backend: expected 'auto', 'torch' or 'numba', got {backend!r}")
+    target = checked_target(pred, gt, target)  # validates pred and gt first
+    numba_runs = pred.device.type == "cpu" and numba_available() and not gt.requires_grad
+    if backend == "numba" and not numba_runs:
+        raise ValueError(f"backend: 'numba' needs CPU tensors, the numba package and a gt without a gradient; "
+                         f"got tensors on {pred.device}, gt.requires_grad={gt.requires_grad}")
+    if backend != "torch" and numba_runs:
+        from velogauss_fast.backends.numba_photometric import photometric_loss_numba
+
+        return photometric_loss_numba(pred, gt, target)
+    d_ssim = 1.0 - ssim(pred, gt, target)
     return (1.0 - LAMBDA_DSSIM) * (pred - gt).abs().mean() + LAMBDA_DSSIM * d_ssim
 
 

@@ -68,11 +68,7 @@ def ssim(pred, gt, target=None):
     computes it here. Differentiable in pred; smaller images, mismatched shapes or non-finite
     values raise ValueError naming the argument.
     """
-    check_image_pair(pred, gt, min_size=SSIM_WINDOW, why="the SSIM window")
-    if target is None:
-        target = _target(gt)
-    elif target.gt is not gt:
-        raise ValueError("target: expected ssim_target(gt) of this gt")
+    target = checked_target(pred, gt, target)
     # Variances and covariance are invariant under a constant shift of x or y, and the
     # form E[x^2] - mu^2 cancels catastrophically in float32 (flat regions came out 1e-4
     # off in SSIM, the error divided by C2 = 9e-4): centre each channel on its mean first,
@@ -86,6 +82,17 @@ def ssim(pred, gt, target=None):
     c1, c2 = SSIM_K1**2, SSIM_K2**2
     ssim_map = ((2 * mu_x * mu_y + c1) * (2 * cov_xy + c2)) / ((mu_x**2 + mu_y**2 + c1) * (var_x + var_y + c2))
     return ssim_map.mean()
+
+
+def checked_target(pred, gt, target):
+    """`target`, or `ssim_target(gt)` when it is None, once pred and gt are checked as SSIM
+    takes them; ValueError naming the argument otherwise (a target of another image too)."""
+    check_image_pair(pred, gt, min_size=SSIM_WINDOW, why="the SSIM window")
+    if target is None:
+        return _target(gt)
+    if target.gt is not gt:
+        raise ValueError("target: expected ssim_target(gt) of this gt")
+    return target
 
 
 def _window_statistics(maps, like):
