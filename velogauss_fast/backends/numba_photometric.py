@@ -115,6 +115,11 @@ def _channels_first(image):
     return image.detach().to(torch.float64).permute(2, 0, 1).contiguous().numpy()
 
 
+def _f64(t):
+    """A contiguous float64 NumPy copy of tensor t."""
+    return t.detach().to(torch.float64).contiguous().numpy()
+
+
 class PhotometricNumba(torch.autograd.Function):
     """VG-LOSS of pred (H, W, 3) against a checked gt and its SSIMTarget: a 0-d tensor in
     pred's dtype, differentiable in pred (the gradient computed by the forward)."""
@@ -135,10 +140,6 @@ class PhotometricNumba(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_value):
         return g_value * ctx.grad, None, None
-
-
-def _f64(t):
-    return t.detach().to(torch.float64).contiguous().numpy()
 
 
 def photometric_loss_numba(pred, gt, target):
