@@ -180,11 +180,14 @@ def test_step_ratio_quick(tmp_path):
     header, rows = table(body)
     assert header == ["round", "before (ms per iteration)", "after (ms per iteration)", "before / after"]
     assert len(rows) == step_ratio.QUICK_ROUNDS
-    # Both versions train the same iterations from the same start, and the side losses beside
-    # the renders keep the arithmetic: every trainable tensor is equal to the last bit. A lost
-    # or doubled gradient, or another order of the gradient sums, would show here.
-    assert result["agreement"] and all(diff == 0 for diff, _ in result["agreement"].values()), result["agreement"]
-    assert result["losses"][1] == pytest.approx(result["losses"][0], rel=1e-6)
+    # Both versions train the same iterations from the same start. Since the numba backend
+    # prepares each view and the photometric loss in float64 kernels (after BEFORE), they
+    # differ by rounding only: the last loss agrees to 1e-8 relative (observed), far inside
+    # 1e-5, which a wrong gradient in either kernel would break; the parameters differ more
+    # (observed 3e-3 relative, on the quaternions): Adam's epsilon of 1e-15 turns the rounding
+    # of near-zero gradients into whole steps. (Worker against inline, to the last bit: tests/app/test_train.py.)
+    assert result["agreement"] and all(diff < 0.05 * max(scale, 1.0) for diff, scale in result["agreement"].values())
+    assert result["losses"][1] == pytest.approx(result["losses"][0], rel=1e-5)
 
 
 def test_a_cuda_run_adds_its_own_section_and_keeps_the_cpu_one(tmp_path):

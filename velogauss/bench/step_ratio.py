@@ -17,9 +17,10 @@ not run, so no densification changes the work between rounds.
 Equal results: both workers run the same iterations from the same start (seed, scene), so
 after the last round their trainable tensors differ by the two versions' rounding only, grown
 over the iterations; each tensor's largest difference is reported beside its largest value,
-with the last iteration's loss of each. A change that keeps the arithmetic (the side losses
-beside the renders and the kept SSIM targets, against BEFORE) leaves them equal to the last
-bit, and the section says so. Equal quality over a whole training is measured by training, not here (README, "Main
+with the last iteration's loss of each. A change that keeps the arithmetic (as the side
+losses beside the renders and the kept SSIM targets did) leaves them equal to the last bit,
+and the section says so; the numba kernels of each view's preparation and of the
+photometric loss (float64 inside) do not. Equal quality over a whole training is measured by training, not here (README, "Main
 job"; benchmarks/RESULTS.md).
 
 Regenerate: python -m velogauss.bench.step_ratio   (needs git and the revision)
