@@ -157,6 +157,39 @@ def sh_basis(x, y, z, degree, Y, dY):
 
 
 @numba.njit(**_JIT)
+def _camera_centre(W, t):
+    """The camera centre -W^T t (3,) of VG-SH's viewing directions."""
+    centre = np.empty(3)
+    for k in range(3):
+        centre[k] = -(W[0, k] * t[0] + W[1, k] * t[1] + W[2, k] * t[2])
+    return centre
+
+
+@numba.njit(**_JIT)
+def _view_geometry(mean, q, s, W, t, fx, fy, limits, R, M, Sigma, A):
+    """One Gaussian's forward up to A Sigma A^T (VG-QUAT, VG-COV, VG-PROJ 1-5 before the
+    dilation), filling R, M, Sigma (3, 3) and A = J W (2, 3). Returns the camera-space point
+    (px, py, pz), whether pz passes the near/far test, the depth z used (1 for a culled
+    Gaussian: it keeps everything finite), p.x / z and p.y / z, the unit quaternion
+    (w, x, y, z), 1 / |q|, whether q is zero, and (r00, r01, r11) of A Sigma A^T."""
+    lo_x, hi_x, lo_y, hi_y = limits
+    px = W[0, 0] * mean[0] + W[0, 1] * mean[1] + W[0, 2] * mean[2] + t[0]
+    py = W[1, 0] * mean[0] + W[1, 1] * mean[1] + W[1, 2] * mean[2] + t[1]
+    pz = W[2, 0] * mean[0] + W[2, 1] * mean[1] + W[2, 2] * mean[2] + t[2]
+    in_depth = NEAR_PLANE <= pz <= FAR_PLANE
+    z = pz if in_depth else 1.0
+    rx, ry = px / z, py / z
+    tx = z * min(max(rx, lo_x), hi_x)
+    ty = z * min(max(ry, lo_y), hi_y)
+    w, x, y, zq, inv_norm, zero_q = _unit_quaternion(q)
+    _rotation(w, x, y, zq, R)
+    _covariance(R, s, M, Sigma)
+    _jacobian_times_view(W, fx, fy, z, tx, ty, A)
+    r00, r01, r11 = _sandwich(A, Sigma)
+    return px, py, pz, in_depth, z, rx, ry, w, x, y, zq, inv_norm, zero_q, r00, r01, r11
+
+
+@numba.njit(**_JIT)
 def project_forward(means, quats, scales, opacities, sh, degree, W, t, intr, width, height, eps2d, antialiased,
                     mean2d, depth, cov2d, conic, compensation, opacity_out, rgb, radius, valid):
     """VG-COV, VG-PROJ and VG-SH of every Gaussian, and the opacities VG-RENDER composites.
@@ -169,29 +202,17 @@ def project_forward(means, quats, scales, opacities, sh, degree, W, t, intr, wid
     uint8.
     """
     fx, fy, cx, cy = intr[0], intr[1], intr[2], intr[3]
-    lo_x, hi_x, lo_y, hi_y = _frustum_limits(fx, fy, cx, cy, width, height)
-    centre = np.empty(3)
-    for k in range(3):
-        centre[k] = -(W[0, k] * t[0] + W[1, k] * t[1] + W[2, k] * t[2])
+    limits = _frustum_limits(fx, fy, cx, cy, width, height)
+    centre = _camera_centre(W, t)
     R, M, Sigma, A = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((2, 3))
     Y, dY = np.empty(N_BASIS), np.empty((N_BASIS, 3))
     for i in range(means.shape[0]):
-        px = W[0, 0] * means[i, 0] + W[0, 1] * means[i, 1] + W[0, 2] * means[i, 2] + t[0]
-        py = W[1, 0] * means[i, 0] + W[1, 1] * means[i, 1] + W[1, 2] * means[i, 2] + t[1]
-        pz = W[2, 0] * means[i, 0] + W[2, 1] * means[i, 1] + W[2, 2] * means[i, 2] + t[2]
+        px, py, pz, ok, z, _, _, _, _, _, _, _, _, r00, r01, r11 = _view_geometry(
+            means[i], quats[i], scales[i], W, t, fx, fy, limits, R, M, Sigma, A)
         depth[i] = pz
-        ok = NEAR_PLANE <= pz <= FAR_PLANE
-        z = pz if ok else 1.0  # a culled Gaussian's stand-in depth keeps everything finite
         u = fx * px / z + cx
         v = fy * py / z + cy
         mean2d[i, 0], mean2d[i, 1] = u, v
-        tx = z * min(max(px / z, lo_x), hi_x)
-        ty = z * min(max(py / z, lo_y), hi_y)
-        w, x, y, zq, _, _ = _unit_quaternion(quats[i])
-        _rotation(w, x, y, zq, R)
-        _covariance(R, scales[i], M, Sigma)
-        _jacobian_times_view(W, fx, fy, z, tx, ty, A)
-        r00, r01, r11 = _sandwich(A, Sigma)
         c00, c11 = r00 + eps2d, r11 + eps2d
         cov2d[i, 0, 0], cov2d[i, 0, 1], cov2d[i, 1, 0], cov2d[i, 1, 1] = c00, r01, r01, c11
         det = c00 * c11 - r01 * r01
@@ -227,28 +248,18 @@ def project_backward(means, quats, scales, opacities, sh, degree, W, t, intr, wi
     degree < 0) into g_means (N, 3), g_quats (N, 4), g_scales (N, 3), g_opacities (N,) and
     g_sh (N, K, 3), which it overwrites. No gradient reaches the camera."""
     fx, fy, cx, cy = intr[0], intr[1], intr[2], intr[3]
-    lo_x, hi_x, lo_y, hi_y = _frustum_limits(fx, fy, cx, cy, width, height)
-    centre = np.empty(3)
-    for k in range(3):
-        centre[k] = -(W[0, k] * t[0] + W[1, k] * t[1] + W[2, k] * t[2])
+    limits = _frustum_limits(fx, fy, cx, cy, width, height)
+    lo_x, hi_x, lo_y, hi_y = limits
+    centre = _camera_centre(W, t)
     R, M, Sigma, A = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((2, 3))
     gS, gA, gM, gR = np.empty((3, 3)), np.empty((2, 3)), np.empty((3, 3)), np.empty((3, 3))
     Y, dY = np.empty(N_BASIS), np.empty((N_BASIS, 3))
     for i in range(means.shape[0]):
         # Forward, again.
-        px = W[0, 0] * means[i, 0] + W[0, 1] * means[i, 1] + W[0, 2] * means[i, 2] + t[0]
-        py = W[1, 0] * means[i, 0] + W[1, 1] * means[i, 1] + W[1, 2] * means[i, 2] + t[1]
-        pz = W[2, 0] * means[i, 0] + W[2, 1] * means[i, 1] + W[2, 2] * means[i, 2] + t[2]
-        in_depth = NEAR_PLANE <= pz <= FAR_PLANE
-        z = pz if in_depth else 1.0
-        rx, ry = px / z, py / z
+        px, py, pz, in_depth, z, rx, ry, w, x, y, zq, inv_norm, zero_q, r00, r01, r11 = _view_geometry(
+            means[i], quats[i], scales[i], W, t, fx, fy, limits, R, M, Sigma, A)
         crx, cry = min(max(rx, lo_x), hi_x), min(max(ry, lo_y), hi_y)
         tx, ty = z * crx, z * cry
-        w, x, y, zq, inv_norm, zero_q = _unit_quaternion(quats[i])
-        _rotation(w, x, y, zq, R)
-        _covariance(R, scales[i], M, Sigma)
-        _jacobian_times_view(W, fx, fy, z, tx, ty, A)
-        r00, r01, r11 = _sandwich(A, Sigma)
         c00, c11 = r00 + eps2d, r11 + eps2d
         det = c00 * c11 - r01 * r01
         ds = det if det > 0 else 1.0
