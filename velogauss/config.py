@@ -101,6 +101,15 @@ class _ModelChoices:
     # tell apart), else uniform. On multi, clusters took the velocity error from 0.566 / 0.765
     # to 0.38 / 0.62; on toss, one body, they made it worse (benchmarks/FIDELITY.md, section 0b).
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
+    # Where rigid patterns' centres (VG-COEF-RIGID's knots) come from: "learned" from the
+    # images alone, from the still scene B = 0; "hull", anchored when the motion starts on the
+    # centroid of the volume the moving Gaussians' convex hull encloses (a uniform body's
+    # centre of mass), the centre at t = 0 then held there (velogauss.train.centres); or
+    # "auto": hull for rigid patterns of one body (the mixing starts uniform) whose centre moves
+    # on a parabola (gravity), else learned.
+    # On toss, learned centres sat 0.05-0.13 off the box's centre and its future drifted
+    # (benchmarks/FIDELITY.md, section 0a).
+    rigid_centre: Literal["auto", "learned", "hull"] = "auto"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
 
@@ -169,6 +178,12 @@ class TrainConfig:
     lr_motion: Rate = 1e-3  # motion networks, decayed to lr_motion_final
     lr_motion_final: Rate = 1e-4
     lr_acc: Rate = 0.05  # the acceleration polynomial Q (see velogauss.train.optim)
+    # Where lr_acc's decay over the motion's schedule ends: 10x below, as the networks' (the
+    # ratio it had before it was a key). A 100x decay (5e-4), probed on toss together with the
+    # acceleration tied to the rigid patterns (2 seeds), fitted the window closer
+    # (interpolation 36.6 dB on both) but extrapolated no better, its knots' reference point
+    # further off the box's centre (benchmarks/FIDELITY.md, section 0a).
+    lr_acc_final: Rate = 5e-3
     # L2 on the ADF's displacement, so velocity carries the motion; at 0.1 the ADF took the
     # motion over on toss (extrapolation 16.6 dB against 20.5 dB at 1.0), and at 10 the
     # velocity fits the paths closer than at 1.0 (benchmarks/FIDELITY.md, "Defaults").

@@ -126,6 +126,13 @@ MIXING_INIT_WEIGHT = 0.8
 # levels off within about 200 steps on the catalogue scenes, in about a second.
 MIXING_INIT_STEPS = 300
 MIXING_INIT_LR = 1e-2
+# VG-COEF-RIGID's centre anchored on the body (velogauss.train.centres): the Gaussians whose
+# convex hull is taken are the moving ones at least this fraction as opaque as the most
+# opaque. Half keeps the body's surface (on toss at the warm-up's end, 834 Gaussians, whose
+# hull centroid is 0.013 from the box's centre) and drops the faint floaters of the random
+# start, which would stretch the hull; relative, so a run whose warm-up is too short to make
+# anything opaque still gets a centre.
+RIGID_HULL_OPACITY = 0.5
 
 # --- Data loading (velogauss.data) -----------------------------------------------------
 # A camera pose is accepted as rigid when its rotation block R satisfies

@@ -40,6 +40,7 @@ from velogauss.model.dynamic import render_gaussians
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
+from velogauss.train.centres import anchor_centres, first_knot_mask, resolve_rigid_centre
 from velogauss.train.frequency import start_frequency
 from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
@@ -173,6 +174,13 @@ class _Loop:
         adf_first = self.spec.velocity is None or self.spec.scheme == "adf-step"
         default_start = cfg.train.warmup if adf_first else cfg.train.warmup + cfg.train.curriculum
         self.adf_start = default_start if cfg.train.adf_start < 0 else cfg.train.adf_start
+        # Rigid patterns anchored on the body's centre (velogauss.train.centres): the mask that
+        # holds their first knot, None when the centres are learned. It applies once the
+        # centres are anchored (extra["centres_anchored"], kept in the checkpoint): a run saved
+        # before there was anchoring resumes with its centres learned, as it was trained.
+        anchored = (self.spec.velocity == "affine" and
+                    resolve_rigid_centre(cfg.model.rigid_centre, profile, cfg.model.mixing_init) == "hull")
+        self.knot_mask = first_knot_mask(model.motion.time.detach()) if anchored else None
 
     def run(self, start, progress):
         cfg = self.cfg.train
@@ -218,6 +226,9 @@ class _Loop:
         params = None
         if spec.moving:
             self.freeze_motion(it)
+            if it == cfg.train.warmup and self.knot_mask is not None:
+                anchor_centres(model)  # the patterns are still until now: the motion does not change
+                self.extra["centres_anchored"] = True
             params = model.motion.params()  # once per step: the render and the side losses share it
         offset = self.carry_offset(it, spec)
         self.optimizer.zero_grad(set_to_none=True)
@@ -234,6 +245,8 @@ class _Loop:
                 # own pixel gradient with its threshold, whatever the number of views per step.
                 self.stats.add(grad.detach() * len(frames), meta["radius"], meta["valid"], camera.width,
                                camera.height)
+        if self.extra.get("centres_anchored") and model.motion.time.grad is not None:
+            model.motion.time.grad.mul_(self.knot_mask)  # the anchored centre at t = 0 stays put
         self.optimizer.step()
         with torch.no_grad():
             image = renders[0][0]

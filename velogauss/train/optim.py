@@ -8,9 +8,9 @@ spins and centres) and the oscillators' coefficients C (VG-COEF-HARM; their shar
 stays with the networks). These get their own, larger rate: Adam moves a parameter by about
 its rate per step, Q's entries must reach |v|²/L (a spin of 4 rad per unit time has
 centripetal coefficients of 16) and B's are spins and world positions of order 1, where a
-network's weights stay O(1) and its width scales its output. Means and motion decay
+network's weights stay O(1) and its width scales its output. Means, motion and acc decay
 exponentially from their initial to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
-camera extent, as in 3DGS. The motion rate runs its decay from the end of the warm-up.
+camera extent, as in 3DGS. The motion and acc rates run their decay from the end of the warm-up.
 """
 
 import math
@@ -48,7 +48,7 @@ def make_optimizer(model, train_cfg, extent):
 
 
 def set_learning_rates(optimizer, iteration, train_cfg, extent):
-    """Means and motion rates at `iteration` (log-linear decay to the final values)."""
+    """Means, motion and acc rates at `iteration` (log-linear decay to the final values)."""
     t = train_cfg
     progress = min(1.0, iteration / max(1, t.iterations))
     motion_progress = min(1.0, max(0, iteration - t.warmup) / max(1, t.iterations - t.warmup))
@@ -58,7 +58,7 @@ def set_learning_rates(optimizer, iteration, train_cfg, extent):
         elif group["name"] == "motion":
             group["lr"] = _log_lerp(t.lr_motion, t.lr_motion_final, motion_progress)
         elif group["name"] == "acc":
-            group["lr"] = _log_lerp(t.lr_acc, t.lr_acc * t.lr_motion_final / t.lr_motion, motion_progress)
+            group["lr"] = _log_lerp(t.lr_acc, t.lr_acc_final, motion_progress)
 
 
 def update_gaussian_groups(optimizer, gaussians, keep, new_rows):
