@@ -163,3 +163,23 @@ def test_a_variant_that_cannot_be_run_says_why(tmp_path):
     (tmp_path / "results").mkdir()
     (tmp_path / "results" / "toss-full-a-prekernels-s0.json").write_text(json.dumps(record))
     assert run_one("toss", "full", "a-prekernels", 0, tmp_path) == record
+
+
+def test_the_centre_command_reads_a_trained_run(tmp_path, capsys):
+    """`python -m velogauss.bench.centre RUN --data SCENE` on a (briefly) trained toss: one
+    line of velocity errors and one each for the spin, the two accelerations and the knots'
+    offset, per body."""
+    from velogauss.bench import centre
+    from velogauss.train import loop
+
+    make_scene("toss", tmp_path / "toss", resolution=16, n_views=2, n_times=3, n_points=50, n_heldout=1)
+    cfg = load_config(None, ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2",
+                             "train.iterations=4", "train.warmup=2", "train.curriculum=1", "physics.n_points=16",
+                             "train.eval_every=0"])
+    loop.train(cfg, load_scene(tmp_path / "toss"), tmp_path / "run", progress=False)
+    centre.main([str(tmp_path / "run"), "--data", str(tmp_path / "toss"), "--times", "0,1"])
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split("] ")[1].split(":")[0].split("  ")[0] for line in lines] == [
+        "velocity error", "spin", "acc_window", "acc_future", "rigid centre's offset from the axis through the true centre"]
+    assert all(line.startswith(f"{tmp_path / 'run'} [box]") for line in lines)
+    assert "t=0:" in lines[0] and "t=1:" in lines[0]
