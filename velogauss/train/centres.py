@@ -12,8 +12,8 @@ point part, and the future frames drift (benchmarks/FIDELITY.md, section 0a).
 `anchor_centres` (config `model.rigid_centre = "hull"`) places every pattern's knots, once,
 when the motion starts training (the warm-up's end, when the Gaussians have fitted the
 t = 0 frames), at the centroid of the volume inside the convex hull of the moving Gaussians
-at least RIGID_HULL_OPACITY times as opaque as the most opaque one: the centre of mass of a uniform convex body, which the
-surface's Gaussians bound whatever their density on it. `first_knot_mask` then holds the
+at least RIGID_HULL_OPACITY times as opaque as the most opaque one: the centre of mass of a
+uniform convex body, which the surface's Gaussians bound whatever their density on it. `first_knot_mask` then holds the
 first knot, the centre at t = 0, there; the other knots and the spin train as before. One
 centre for every pattern is one body: "auto" anchors only where the mixing starts uniform,
 the scenes with one body to track (velogauss.train.mixing), and only a centre that moves on
