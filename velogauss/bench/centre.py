@@ -76,7 +76,7 @@ def reference_offsets(model, scene):
     that follows another material point of the body is off by that point's distance from
     the axis through the centre. Raises ValueError for other pattern forms."""
     spec = model.spec
-    if spec.velocity != "affine" or spec.config.pattern_form != "rigid":
+    if not spec.rigid_patterns:
         raise ValueError("model: reference offsets need rigid motion patterns (model.patterns = 'rigid')")
     cfg = spec.config
     n = cfg.rigid_knots
@@ -138,8 +138,7 @@ def main(argv=None):
         model, cfg = load_model(run)
         scene = load_ground_truth(Path(run) / "data" if args.data is None else args.data)
         motion = centre_motion(model, scene, cfg.data.max_time)
-        rigid = model.spec.velocity == "affine" and model.spec.config.pattern_form == "rigid"
-        offsets = reference_offsets(model, scene) if rigid else {}
+        offsets = reference_offsets(model, scene) if model.spec.rigid_patterns else {}
         for name, rows in centre_errors(model, scene, times).items():
             # |error| beside the true speed, not their ratio: a centre spinning in place is at rest.
             cells = "  ".join(f"t={t:g}: {fmt(err)} (|error| {np.linalg.norm(err):.3f} at speed {speed:.3f})"

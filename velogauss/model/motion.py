@@ -53,7 +53,7 @@ class MotionParameters(nn.Module):
         params = params_to_torch(init_motion_params(rng, cfg), torch.float32, "cpu")
         self.code = _parameter_list(params["code"])
         self.mix = _parameter_list(params["mix"])
-        if spec.velocity == "affine" and cfg.pattern_form == "rigid":
+        if spec.rigid_patterns:
             self.time = nn.Parameter(params["time"])
         elif spec.velocity == "affine":
             self.time = _parameter_list(params["time"])

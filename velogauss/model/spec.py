@@ -87,6 +87,12 @@ class MotionSpec:
     carry_offset: float
     carry_loss: bool
 
+    @property
+    def rigid_patterns(self) -> bool:
+        """The affine velocity's motion patterns are VG-COEF-RIGID's rigid bodies (`params["time"]`
+        is their B, a (K, 3 + 3 n) tensor)."""
+        return self.velocity == "affine" and self.config.pattern_form == "rigid"
+
     def without_adf(self) -> "MotionSpec":
         """This spec with the ADF skipped: what training runs before the ADF starts learning
         (its last layer is still zero then, so skipping it is exactly the identity). Scheme

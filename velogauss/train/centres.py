@@ -70,8 +70,7 @@ def anchor_centres(model):
     a still pattern is still wherever its centre is, so the motion does not change (up to
     the float32 rounding of ċ, the knots times Lagrange weights that cancel); or when no
     Gaussian moves."""
-    spec = model.spec
-    if spec.velocity != "affine" or spec.config.pattern_form != "rigid":
+    if not model.spec.rigid_patterns:
         raise ValueError("model: anchor_centres needs rigid motion patterns (model.patterns = 'rigid')")
     B = model.motion.time
     omega, first, *rest = B.split(3, dim=-1)

@@ -31,7 +31,7 @@ def make_optimizer(model, train_cfg, extent):
     groups = [{"params": [getattr(model.gaussians, name)], "lr": lrs[name], "name": name} for name in FIELDS]
     if model.motion is not None:
         acc = [model.motion.acc] if model.spec.acceleration else []
-        if model.spec.velocity == "affine" and model.spec.config.pattern_form == "rigid":
+        if model.spec.rigid_patterns:
             acc.append(model.motion.time)
         if model.spec.velocity == "affine" and model.spec.config.pattern_form == "harmonic":
             # C, not the frequency (VG-COEF-HARM): Adam moves a parameter by about its rate
