@@ -135,7 +135,9 @@ _BEFORE_ANCHORING = {"a-learned": [], "a-nomix": NOMIX, "a-uniform": [*UNIFORM, 
                      **_MIXING_ERA,
                      **{name: [*changes, *UNIFORM, *NOMIX] for name, changes in _ANTIALIASED_ERA.items()},
                      **{name: [*changes, *CLASSIC, *UNIFORM, *NOMIX] for name, changes in _CLASSIC_ERA.items()}}
-VARIANTS = {"a": [], "a-hull": ["model.rigid_centre=hull"],
+# The ablations at this version's defaults ("-k": trained with the compiled kernels, section 0a).
+_ABLATIONS = {"a-no-gpc-k": ["model.ablation=no-gpc"], "deform-only-k": ["model.ablation=deform-only"]}
+VARIANTS = {"a": [], "a-hull": ["model.rigid_centre=hull"], **_ABLATIONS,
             **{name: [*changes, *LEARNED] for name, changes in _BEFORE_ANCHORING.items()}}
 # Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
 # the numba backend's compiled preparation and photometric loss. The kernels changed every
