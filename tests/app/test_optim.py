@@ -1,6 +1,7 @@
 """velogauss.train.optim: parameter groups, learning-rate schedules and the optimiser surgery of
 densification."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -77,8 +78,20 @@ def test_schedules_decay_log_linearly_between_their_ends():
     # The motion rates run their decay from the warm-up's end, the acceleration's to its own final rate.
     assert lr(200)["motion"] == pytest.approx(TRAIN.lr_motion) and start["motion"] == pytest.approx(TRAIN.lr_motion)
     assert end["motion"] == pytest.approx(TRAIN.lr_motion_final)
-    assert lr(200)["acc"] == pytest.approx(TRAIN.lr_acc) and end["acc"] == pytest.approx(TRAIN.lr_acc_final)
+    # The acceleration's cooldown: the last tenth of the iterations (900-1000 here) scales it
+    # down log-linearly from lr_acc_final's schedule to lr_acc_cooled.
+    assert lr(200)["acc"] == pytest.approx(TRAIN.lr_acc) and end["acc"] == pytest.approx(TRAIN.lr_acc_cooled)
+    base = lambda it: math.exp(math.log(TRAIN.lr_acc) + (it - 200) / 800 * math.log(TRAIN.lr_acc_final / TRAIN.lr_acc))  # noqa: E731
+    assert lr(900)["acc"] == pytest.approx(base(900))
+    assert lr(950)["acc"] == pytest.approx(base(950) * math.sqrt(TRAIN.lr_acc_cooled / TRAIN.lr_acc_final))
     assert start["sh_dc"] == end["sh_dc"] == TRAIN.lr_sh and start["sh_rest"] == pytest.approx(TRAIN.lr_sh / 20)
+
+
+def test_no_cooldown_leaves_the_acceleration_schedule_as_it_was():
+    plain = dataclasses.replace(TRAIN, acc_cooldown=0.0)
+    opt = make_optimizer(_model(), plain, EXTENT)
+    set_learning_rates(opt, plain.iterations, plain, EXTENT)
+    assert {g["name"]: g["lr"] for g in opt.param_groups}["acc"] == pytest.approx(plain.lr_acc_final)
 
 
 def test_update_keeps_the_kept_rows_moments_and_zeroes_the_new_ones():

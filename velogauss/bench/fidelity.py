@@ -124,21 +124,29 @@ UNIFORM = ["model.mixing_init=uniform"]
 # Every variant but those of _MIXING_ERA was recorded before train.lambda_mix became 1e-3
 # (section 0) and keeps it off.
 NOMIX = ["train.lambda_mix=0"]
-# Every variant but "a" and "a-hull" was recorded before model.rigid_centre = "auto" anchored
+# Every variant of _BEFORE_ANCHORING was recorded before model.rigid_centre = "auto" anchored
 # the rigid patterns' centre of a body in free flight (toss, section 0a) and keeps it learned
 # (on the other scenes "auto" is "learned": nothing changes there).
 LEARNED = ["model.rigid_centre=learned"]
-# "a": today's defaults ("a-hull": the centre anchored where "auto" leaves it learned, spin);
-# "a-learned", "a-nomix", "a-uniform" and "a-classic": those of the four versions before.
+# "a-learned", "a-nomix", "a-uniform" and "a-classic": the defaults of the four versions
+# before "a-nocool".
 _BEFORE_ANCHORING = {"a-learned": [], "a-nomix": NOMIX, "a-uniform": [*UNIFORM, *NOMIX],
                      "a-clusters": ["model.mixing_init=clusters", *NOMIX], "a-classic": [*CLASSIC, *UNIFORM, *NOMIX],
                      **_MIXING_ERA,
                      **{name: [*changes, *UNIFORM, *NOMIX] for name, changes in _ANTIALIASED_ERA.items()},
                      **{name: [*changes, *CLASSIC, *UNIFORM, *NOMIX] for name, changes in _CLASSIC_ERA.items()}}
-# The ablations at this version's defaults ("-k": trained with the compiled kernels, section 0a).
-_ABLATIONS = {"a-no-gpc-k": ["model.ablation=no-gpc"], "deform-only-k": ["model.ablation=deform-only"]}
-VARIANTS = {"a": [], "a-hull": ["model.rigid_centre=hull"], **_ABLATIONS,
-            **{name: [*changes, *LEARNED] for name, changes in _BEFORE_ANCHORING.items()}}
+# "a": today's defaults. "a-nocool": those of the version before the acceleration group's
+# cooldown (train.acc_cooldown, section 0d); "a-lracc5e-4": that version with the group's rate
+# decayed 100x over the whole schedule, not 10x; "a-hull": that version with the centre
+# anchored where "auto" leaves it learned (spin); "a-no-gpc-k" and "deform-only-k": its
+# ablations ("-k": trained with the compiled kernels).
+_BEFORE_COOLDOWN = {"a-nocool": [], "a-lracc5e-4": ["train.lr_acc_final=5e-4"], "a-hull": ["model.rigid_centre=hull"],
+                    "a-no-gpc-k": ["model.ablation=no-gpc"], "deform-only-k": ["model.ablation=deform-only"],
+                    **{name: [*changes, *LEARNED] for name, changes in _BEFORE_ANCHORING.items()}}
+# Every variant but "a" was recorded before the cooldown and keeps it off (deform-only has no
+# acceleration group: nothing changes there).
+NOCOOL = ["train.acc_cooldown=0"]
+VARIANTS = {"a": [], **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
 # Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
 # the numba backend's compiled preparation and photometric loss. The kernels changed every
 # training's rounding, which moves toss's extrapolation by several dB either way (FIDELITY.md,

@@ -11,6 +11,9 @@ centripetal coefficients of 16) and B's are spins and world positions of order 1
 network's weights stay O(1) and its width scales its output. Means, motion and acc decay
 exponentially from their initial to their final rate (3DGS's `get_expon_lr_func` without delay); means scale with the
 camera extent, as in 3DGS. The motion and acc rates run their decay from the end of the warm-up.
+Over the last `train.acc_cooldown` of the iterations the acc rate falls a further
+`lr_acc_final / lr_acc_cooled` (10x): the patterns' world quantities stop wandering by a
+fraction of a pixel per step before training ends.
 """
 
 import math
@@ -48,7 +51,8 @@ def make_optimizer(model, train_cfg, extent):
 
 
 def set_learning_rates(optimizer, iteration, train_cfg, extent):
-    """Means, motion and acc rates at `iteration` (log-linear decay to the final values)."""
+    """Means, motion and acc rates at `iteration` (log-linear decay to the final values; the
+    acc rate then cools down over the last `train.acc_cooldown` of the iterations)."""
     t = train_cfg
     progress = min(1.0, iteration / max(1, t.iterations))
     motion_progress = min(1.0, max(0, iteration - t.warmup) / max(1, t.iterations - t.warmup))
@@ -58,7 +62,7 @@ def set_learning_rates(optimizer, iteration, train_cfg, extent):
         elif group["name"] == "motion":
             group["lr"] = _log_lerp(t.lr_motion, t.lr_motion_final, motion_progress)
         elif group["name"] == "acc":
-            group["lr"] = _log_lerp(t.lr_acc, t.lr_acc_final, motion_progress)
+            group["lr"] = _log_lerp(t.lr_acc, t.lr_acc_final, motion_progress) * _cooldown(iteration, t)
 
 
 def update_gaussian_groups(optimizer, gaussians, keep, new_rows):
@@ -89,6 +93,16 @@ def update_gaussian_groups(optimizer, gaussians, keep, new_rows):
                 state[key] = torch.cat([moment, moment.new_zeros((extra,) + moment.shape[1:])])
             optimizer.state[new] = state
         group["params"][0] = new
+
+
+def _cooldown(iteration, t):
+    """The acc rate's factor at `iteration`: 1 before the last `t.acc_cooldown` of the
+    iterations, then log-linearly down to `t.lr_acc_cooled / t.lr_acc_final` at the last one."""
+    span = t.acc_cooldown * t.iterations
+    if span <= 0:
+        return 1.0
+    progress = min(1.0, max(0.0, (iteration - (t.iterations - span)) / span))
+    return _log_lerp(1.0, t.lr_acc_cooled / t.lr_acc_final, progress)
 
 
 def _log_lerp(start, end, progress):
