@@ -146,7 +146,9 @@ _BEFORE_COOLDOWN = {"a-nocool": [], "a-lracc5e-4": ["train.lr_acc_final=5e-4"], 
 # Every variant but "a" was recorded before the cooldown and keeps it off (deform-only has no
 # acceleration group: nothing changes there).
 NOCOOL = ["train.acc_cooldown=0"]
-VARIANTS = {"a": [], **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
+# "a-no-gpc-c": the physics losses' ablation with the cooldown.
+VARIANTS = {"a": [], "a-no-gpc-c": ["model.ablation=no-gpc"],
+            **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
 # Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
 # the numba backend's compiled preparation and photometric loss. The kernels changed every
 # training's rounding, which moves toss's extrapolation by several dB either way (FIDELITY.md,
