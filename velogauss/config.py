@@ -30,7 +30,7 @@ from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
 from velogauss_core.motion import (ABLATIONS, EFFECTS, INTEGRATORS, AccelerationForm, Ablation, Effect, Integrator,
-                                   MotionSizes, PatternForm, Scheme)
+                                   MotionSizes, PatternForm, QueryCode, Scheme)
 from velogauss_core.rendering import RasterizeMode
 
 
@@ -110,6 +110,13 @@ class _ModelChoices:
     # On toss, learned centres sat 0.05-0.13 off the box's centre and its future drifted
     # (benchmarks/FIDELITY.md, section 0a).
     rigid_centre: Literal["auto", "learned", "hull"] = "auto"
+    # The velocity of a material point between the Gaussians (velocity queries, evaluation,
+    # viewer; training and rendering move the Gaussians by their own weights either way):
+    # "gaussians" takes the mixing weights of its nearest Gaussians (VG-FIELD-GAUSS), "network"
+    # the code network at the point (VG-FIELD). On multi the network carried the ground's
+    # still pattern into the bodies' bottoms, whose Gaussians move with the bodies: velocity
+    # error 0.196 -> 0.119 (benchmarks/FIDELITY.md, section 0e).
+    query_code: QueryCode = "gaussians"
     ablation: Ablation = "full"
     sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
 

@@ -23,13 +23,15 @@ spaced times in [0, 1]; those `> max_time` are the future):
   times its largest value over the times (zero, or a periodic motion's reversal, zero up to
   rounding) has no relative error (None) and is left out of the means. Also reported: the mean per-point
   error `mean_i |v(x_i, t) − v_gt(x_i, t)|` (world units per unit time).
-  Two velocities are scored: the particle velocity `particle_velocity(x0, x, t)` (the code
-  frozen at the material point's start, what moves the Gaussians; keys `relative_l2`,
-  `mean_abs`) and the Eulerian field `velocity_at(x, t)` (VG-FIELD, the code taken at x,
-  what the physics residuals constrain; key `field_relative_l2`). With one moving body the
-  two agree once the code is constant over it; with several bodies moving apart the field
-  at x(t) reads the code of whatever sat at x at t = 0, so it can only be as good as the
-  physics losses make it.
+  Two velocities are scored: the particle velocity `particle_velocity(x0, x, t)` (the
+  mixing weights frozen at the material point's start, as along a Gaussian's path; keys
+  `relative_l2`, `mean_abs`) and the Eulerian field `velocity_at(x, t)` (the weights read at
+  x at time t; key `field_relative_l2`). The points are surface points, not Gaussians: under
+  the default `model.query_code = "gaussians"` both take the weights of their nearest
+  Gaussians (VG-FIELD-GAUSS: at x0 among the canonical means, at x among the Gaussians'
+  positions at t), under "network" the code network's at x0 or x (VG-FIELD, the field the
+  physics residuals constrain, which with several bodies moving apart reads at x(t) the code
+  of whatever sat at x at t = 0).
   Predicting zero velocity gives a relative error of exactly 1. A model without a velocity
   field (the "deform-only" ablation) has no velocity to score: every velocity error is None.
 - trajectories: the Gaussians whose canonical mean `μ0 = tracked_positions(0)` lies inside
@@ -276,7 +278,7 @@ def summary_markdown(result):
         rows = [
             (f"particle velocity relative L2 error ({vel['points']} surface points)", vel, "relative_l2", 3),
             ("particle velocity mean error (units / unit time)", vel, "mean_abs", 4),
-            ("Eulerian field (VG-FIELD) relative L2 error", vel, "field_relative_l2", 3),
+            ("Eulerian field relative L2 error", vel, "field_relative_l2", 3),
             (f"trajectory mean distance ({traj['gaussians']} Gaussians, units)", traj, "mean_distance", 4),
             ("trajectory mean distance if nothing moved (units)", traj, "static_mean_distance", 4),
         ]

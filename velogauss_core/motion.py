@@ -74,6 +74,11 @@ PatternForm = Literal["mlp", "rigid", "harmonic"]
 # (VG-COEF-HARM).
 PATTERN_FORMS: tuple[str, ...] = get_args(PatternForm)
 
+QueryCode = Literal["gaussians", "network"]
+# Where a material point that is not a Gaussian takes its mixing weights (spec/motion.md,
+# VG-FIELD-GAUSS): "gaussians" interpolated from its nearest Gaussians' own, "network" the
+# code network at the point (VG-CODE, VG-FIELD).
+
 VelocityKind = Literal["affine", "mlp"]
 # How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP
 # v(gamma(x), t) (PDS off, "no-pds"); a model without velocity has None.

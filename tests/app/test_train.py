@@ -295,7 +295,8 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
 
 
 def test_particle_velocity_keeps_the_start_code(tiny_scene):
-    cfg, model = _model(tiny_scene, MLP_PATTERNS)
+    # The code network's answer between the Gaussians (VG-FIELD); "gaussians" is tested below.
+    cfg, model = _model(tiny_scene, [*MLP_PATTERNS, "model.query_code=network"])
     with torch.no_grad():
         last = model.motion.time[-1]
         last.copy_(torch.randn(last.shape, generator=torch.Generator().manual_seed(0)))
@@ -309,6 +310,34 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
         params, cfg_m = model.motion.params(), model.spec.config
         w = velocity_coefficients(params, 0.4, physics_code(params, x0, cfg_m), cfg_m)
         assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)
+
+
+@pytest.mark.spec("VG-FIELD-GAUSS")
+def test_velocity_between_the_gaussians(tiny_scene):
+    # VG-FIELD-GAUSS, the default: on a Gaussian's canonical mean a particle moves with that
+    # Gaussian's own weights; a static Gaussian lends zero weights; the Eulerian field takes
+    # the weights of the Gaussians nearest at time t, so on each Gaussian's physics position
+    # it is that Gaussian's own velocity.
+    cfg, model = _model(tiny_scene, MLP_PATTERNS)
+    assert model.spec.query_code == "gaussians"
+    with torch.no_grad():
+        last = model.motion.time[-1]
+        last.copy_(torch.randn(last.shape, generator=torch.Generator().manual_seed(0)))
+        params, cfg_m = model.motion.params(), model.spec.config
+        mu = model.gaussians.means
+        own = affine_velocity(mu, velocity_coefficients(params, 0.4, physics_code(params, mu, cfg_m), cfg_m))
+        torch.testing.assert_close(model.particle_velocity(mu, mu, 0.4), own, rtol=1e-4, atol=1e-5)
+        x_star = model.tracked_positions(0.4)
+        at_star = affine_velocity(x_star, velocity_coefficients(params, 0.4, physics_code(params, mu, cfg_m), cfg_m))
+        torch.testing.assert_close(model.velocity_at(x_star, 0.4), at_star, rtol=1e-4, atol=1e-5)
+        # Between the Gaussians it differs from the code network's answer.
+        x0 = torch.rand(64, 3, generator=torch.Generator().manual_seed(1)) - 0.5
+        network = velocity_coefficients(params, 0.4, physics_code(params, x0, cfg_m), cfg_m)
+        assert (model.particle_velocity(x0, x0, 0.4) - affine_velocity(x0, network)).abs().max() > 1e-3
+        # With every Gaussian static, nothing moves: every row of the weights is zero.
+        model.set_moving(torch.zeros(len(mu), dtype=torch.bool))
+        assert torch.equal(model.particle_velocity(x0, x0, 0.4), torch.zeros_like(x0))
+        assert torch.equal(model.velocity_at(x0, 0.4), torch.zeros_like(x0))
 
 
 @pytest.mark.parametrize("extra", [["model.scheme=adf-step"], ["model.scheme=adf-step", "model.ablation=no-pds"],

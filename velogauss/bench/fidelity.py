@@ -143,12 +143,17 @@ _BEFORE_ANCHORING = {"a-learned": [], "a-nomix": NOMIX, "a-uniform": [*UNIFORM, 
 _BEFORE_COOLDOWN = {"a-nocool": [], "a-lracc5e-4": ["train.lr_acc_final=5e-4"], "a-hull": ["model.rigid_centre=hull"],
                     "a-no-gpc-k": ["model.ablation=no-gpc"], "deform-only-k": ["model.ablation=deform-only"],
                     **{name: [*changes, *LEARNED] for name, changes in _BEFORE_ANCHORING.items()}}
-# Every variant but "a" was recorded before the cooldown and keeps it off (deform-only has no
+# The variants of _BEFORE_COOLDOWN were recorded before the cooldown and keep it off (deform-only has no
 # acceleration group: nothing changes there).
 NOCOOL = ["train.acc_cooldown=0"]
-# "a-no-gpc-c": the physics losses' ablation with the cooldown.
-VARIANTS = {"a": [], "a-no-gpc-c": ["model.ablation=no-gpc"],
-            **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
+# "a-netq": the version before the velocity between the Gaussians (VG-FIELD-GAUSS, section
+# 0e): the same training, the code network's velocity at the evaluation's points;
+# "a-no-gpc-c": its physics losses' ablation.
+_BEFORE_QUERY = {"a-netq": [], "a-no-gpc-c": ["model.ablation=no-gpc"],
+                 **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
+# Every variant but "a" was recorded with the code network's velocity between the Gaussians.
+NETQ = ["model.query_code=network"]
+VARIANTS = {"a": [], **{name: [*changes, *NETQ] for name, changes in _BEFORE_QUERY.items()}}
 # Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
 # the numba backend's compiled preparation and photometric loss. The kernels changed every
 # training's rounding, which moves toss's extrapolation by several dB either way (FIDELITY.md,

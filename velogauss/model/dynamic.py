@@ -19,6 +19,7 @@ from torch import nn
 from velogauss.model import motion as motion_fns
 from velogauss.model.spec import MotionSpec
 from velogauss_fast.checks import check_array, check_finite
+from velogauss_fast.motion.between import mixing_between
 from velogauss_fast.motion.scalars import check_time
 from velogauss_fast.quaternion import normalize_quat
 from velogauss_core.rendering import RasterizeMode, check_mode
@@ -107,23 +108,42 @@ class VeloGaussModel(nn.Module):
 
     def velocity_at(self, x, t):
         """Learned Eulerian velocity (M, 3) at world points x (M, 3); zero without a velocity model.
-        A non-finite or wrongly shaped x, or a bad t, raises ValueError."""
+        Under spec.query_code "gaussians" the mixing weights at x are those of the Gaussians
+        nearest to x at time t (their physics positions x*(t)), VG-FIELD-GAUSS; else the code
+        network's at x (VG-FIELD). A non-finite or wrongly shaped x, or a bad t, raises ValueError."""
         check_finite(x=check_array("x", x, (None, 3)))
         _check_time(t)
         if not self.has_velocity:
             return torch.zeros_like(x)
-        return motion_fns.velocity_at(self.motion.params(), self.spec, x, t)
+        params = self.motion.params()
+        if self.spec.query_code == "gaussians":
+            m = self._mixing_between(params, x, self.state_at(t, params)[3])
+            return motion_fns.velocity_with_mixing(params, self.spec, x, t, m)
+        return motion_fns.velocity_at(params, self.spec, x, t)
 
     def particle_velocity(self, x0, x, t):
         """Velocity (M, 3) the model gives the material points that started at x0 (M, 3) when
-        they are at x (M, 3) at time t (`velogauss.model.motion.particle_velocity`); zero
-        without a velocity model. Non-finite or wrongly shaped points, or a bad t, raise ValueError."""
+        they are at x (M, 3) at time t; zero without a velocity model. Under spec.query_code
+        "gaussians" a point's mixing weights are those of the Gaussians nearest to x0 among the
+        canonical means, frozen along its path (VG-FIELD-GAUSS); else the code network's at x0
+        (`velogauss.model.motion.particle_velocity`). Non-finite or wrongly shaped points, or
+        a bad t, raise ValueError."""
         check_array("x0", x0, (None, 3))
         check_finite(x0=x0, x=check_array("x", x, tuple(x0.shape)))
         _check_time(t)
         if not self.has_velocity:
             return torch.zeros_like(x)
-        return motion_fns.particle_velocity(self.motion.params(), self.spec, x0, x, t)
+        params = self.motion.params()
+        if self.spec.query_code == "gaussians":
+            m = self._mixing_between(params, x0, self.gaussians.means)
+            return motion_fns.velocity_with_mixing(params, self.spec, x, t, m)
+        return motion_fns.particle_velocity(params, self.spec, x0, x, t)
+
+    def _mixing_between(self, params, x, centres):
+        """VG-FIELD-GAUSS's mixing weights (M, K) at x (M, 3) from the Gaussians at `centres`
+        (N, 3): their own weights, the rows of static (frozen) Gaussians zero, as they do not move."""
+        own = motion_fns.own_mixing(params, self.spec, self.gaussians.means)
+        return mixing_between(x, centres, own * self.moving[:, None].to(own.dtype))
 
     def set_moving(self, moving):
         """Flag which particles are integrated (bool (N,))."""

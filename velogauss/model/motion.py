@@ -7,7 +7,9 @@ Everything the motion computes is a pure function of that dict and the resolved
 
 - `gaussians_at`: the Gaussians at time t (the spec's scheme, then the ADF residual);
 - `carry_loss`: VG-LOSS-CARRY, the velocity fitted to the ADF's paths (scheme "adf-step");
-- `velocity_at`, `particle_velocity`: the learned velocities (Eulerian, and along paths);
+- `velocity_at`, `particle_velocity`: the learned velocities (Eulerian, and along paths),
+  the code taken from the network; `own_mixing` and `velocity_with_mixing` build them from
+  given mixing weights (VG-FIELD-GAUSS, which `velogauss.model.dynamic` interpolates);
 - `motion_residuals`: the physics residuals of the training loss.
 
 What is built follows the spec: the velocity's time network ("affine", PDS) or the
@@ -24,7 +26,7 @@ from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_core.motion import N_BASIS, carry_start, init_motion_params, mlp_layers, network_shapes
 from velogauss_fast.motion import carry
 from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.coefficients import coefficients
+from velogauss_fast.motion.coefficients import coefficients, masked, mixing_weights, motion_patterns
 from velogauss_fast.motion.deform import adf_residual, compose_state
 from velogauss_fast.motion.integrate import integrate
 from velogauss_fast.motion.params import params_to_torch
@@ -129,6 +131,18 @@ def particle_velocity(params: dict, spec: MotionSpec, x0: torch.Tensor, x: torch
         cfg = spec.config
         return velocity(x, coefficients(params, t, physics_code(params, x0, cfg), cfg))
     return velocity_at(params, spec, x, t)
+
+
+def own_mixing(params: dict, spec: MotionSpec, x0: torch.Tensor) -> torch.Tensor:
+    """The mixing weights m(E(γ(x0))) (N, K) of the particles at canonical x0 (N, 3) (VG-CODE,
+    VG-COEF): what each Gaussian moves with."""
+    return mixing_weights(params, physics_code(params, x0, spec.config))
+
+
+def velocity_with_mixing(params: dict, spec: MotionSpec, x: torch.Tensor, t, m: torch.Tensor) -> torch.Tensor:
+    """Φ(x) (m P(t)) (N, 3), masked as VG-COEF, at points x (N, 3) with mixing weights m (N, K):
+    the velocity of VG-FIELD-GAUSS, whose m is interpolated from the Gaussians' own."""
+    return velocity(x, masked(m @ motion_patterns(params, t, spec.config), spec.config.mask))
 
 
 def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from velogauss.model.profile import MotionProfile
 # `Scheme` ("integrate" (a), "adf-step" (b)) is defined once in velogauss_core.motion, where
 # the config (which this package imports) can type its key.
-from velogauss_core.motion import Integrator, MotionConfig, MotionSizes, Scheme, VelocityKind
+from velogauss_core.motion import Integrator, MotionConfig, MotionSizes, QueryCode, Scheme, VelocityKind
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,9 @@ class MotionSpec:
       the velocity alone carries the ADF's state (VG-CARRY); None for "integrate";
     carry_offset: scheme "adf-step": |t - t_start| of VG-CARRY in training (0 otherwise);
     carry_loss: VG-LOSS-CARRY (the affine velocity fitted to the ADF's paths) can be on:
-      scheme "adf-step" with the affine velocity; its weight is train.lambda_carry.
+      scheme "adf-step" with the affine velocity; its weight is train.lambda_carry;
+    query_code: where a material point that is not a Gaussian takes its mixing weights
+      (VG-FIELD-GAUSS); "network" wherever the velocity is not affine (no mixing weights).
     """
 
     scheme: Scheme
@@ -86,6 +88,7 @@ class MotionSpec:
     carry_until: float | None
     carry_offset: float
     carry_loss: bool
+    query_code: QueryCode
 
     @property
     def rigid_patterns(self) -> bool:
@@ -134,5 +137,7 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
         carry_until=float(max_time) if carry else None,
         carry_offset=float(model_cfg.carry_offset) if carry else 0.0,
         carry_loss=carry and velocity == "affine",
+        # Only the affine velocity has mixing weights to interpolate.
+        query_code=model_cfg.query_code if velocity == "affine" else "network",
     )
 

@@ -1,9 +1,11 @@
 """Walkthrough part: the affine velocity model, from basis to Eulerian field
-(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-RIGID, VG-COEF-HARM, VG-VEL, VG-FIELD)."""
+(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-RIGID, VG-COEF-HARM, VG-VEL, VG-FIELD,
+VG-FIELD-GAUSS)."""
 
 import numpy as np
 
 from velogauss_ref.motion.basis import affine_from_coefficients, basis_matrix
+from velogauss_ref.motion.between import mixing_between
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
                                               motion_patterns, rigid_velocity_patterns)
@@ -241,6 +243,60 @@ def _field_figure(figures, params):
                 "the physics residuals (VG-TRANSPORT, VG-DIV) measure how far from physical it is.")
 
 
+def between_section(figures):
+    """VG-FIELD-GAUSS: a ball's Gaussians and the still ground's; the weights between them."""
+    centres, weights = _ball_on_ground()
+    # The ball's lowest point, a point on its side, one halfway across the gap, one on the ground.
+    x = np.array([[0.0, 0.0, 0.05], [0.5, 0.0, 0.55], [0.0, 0.0, 0.025], [0.8, 0.0, 0.0]])
+    return Section(
+        "A Gaussian moves with the mixing weights of its own canonical mean. A material point that "
+        "is not a Gaussian (a surface point the evaluation scores, an arrow in the viewer) takes, "
+        "by default, the inverse-square-distance mean of its 8 nearest Gaussians' weights, the "
+        "still (static) Gaussians' rows zero. The example: a ball of 800 Gaussians on pattern 0, 0.05 "
+        "above a still ground of Gaussians 0.1 apart. The ball's lowest point keeps 0.89 of the "
+        "ball's pattern, its side all of it, the middle of the gap half, the ground none. On the "
+        "`multi` scene the smooth code network, asked the same, leaned to the ground's pattern on "
+        "the bodies' lowest points (benchmarks/FIDELITY.md, section 0e).",
+        [session({"x": x}, "m = mixing_between(x, centres, weights)  # ball's Gaussians: (1, 0); ground's: (0, 0)",
+                 {"m": mixing_between(x, centres, weights)}),
+         _between_figure(figures, centres, weights)],
+    )
+
+
+def _ball_on_ground():
+    """(centres (N, 3), weights (N, 2)): 800 Gaussians on a ball of radius 0.5 at height 0.55
+    on pattern 0, and a grid 0.1 apart on the ground z = 0, static (zero rows)."""
+    golden = np.pi * (3 - np.sqrt(5))  # a Fibonacci sphere: evenly spread points
+    k = np.arange(800)
+    z = 1 - 2 * (k + 0.5) / 800
+    r = np.sqrt(1 - z**2)
+    ball = 0.5 * np.stack([r * np.cos(golden * k), r * np.sin(golden * k), z], axis=1) + [0.0, 0.0, 0.55]
+    u = np.linspace(-1.2, 1.2, 25)
+    gx, gy = np.meshgrid(u, u)
+    ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    weights = np.concatenate([np.tile([1.0, 0.0], (len(ball), 1)), np.zeros((len(ground), 2))])
+    return np.concatenate([ball, ground]), weights
+
+
+def _between_figure(figures, centres, weights):
+    u = np.linspace(-1.2, 1.2, 97)
+    gx, gz = np.meshgrid(u, np.linspace(-0.2, 1.2, 57))
+    points = np.stack([gx.ravel(), np.zeros(gx.size), gz.ravel()], axis=1)
+    share = mixing_between(points, centres, weights)[:, 0].reshape(gx.shape)
+    fig = new_figure(6, 3.6)
+    ax = fig.subplots()
+    image = ax.pcolormesh(gx, gz, share, cmap="viridis", vmin=0, vmax=1, shading="auto")
+    near = np.abs(centres[:, 1]) < 0.06
+    ax.scatter(centres[near, 0], centres[near, 2], s=6, c="white", edgecolors="black", linewidths=0.3)
+    ax.set(xlabel="x", ylabel="z", aspect="equal", title="weight of the ball's pattern between the Gaussians")
+    fig.colorbar(image, ax=ax, shrink=0.8)
+    return save(fig, figures, "between-gaussians",
+                "mixing_between on the slice y = 0 through a ball of Gaussians (weights (1, 0)) 0.05 above "
+                "a still ground (weights (0, 0)); dots: the Gaussians near the slice. The ball's pattern "
+                "holds to its surface and falls off across the gap to the ground; away from both, a point "
+                "takes the pattern of the nearer.")
+
+
 def mlp_velocity_section(figures):
     """VG-VEL-MLP: the no-pds velocity at a few points and times; no code, no basis."""
     params = mlp_velocity_params()
@@ -258,4 +314,5 @@ def mlp_velocity_section(figures):
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
             "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
-            "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-VEL-MLP": mlp_velocity_section}
+            "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-FIELD-GAUSS": between_section,
+            "VG-VEL-MLP": mlp_velocity_section}
