@@ -151,9 +151,14 @@ NOCOOL = ["train.acc_cooldown=0"]
 # "a-no-gpc-c": its physics losses' ablation.
 _BEFORE_QUERY = {"a-netq": [], "a-no-gpc-c": ["model.ablation=no-gpc"],
                  **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
-# Every variant but "a" was recorded with the code network's velocity between the Gaussians.
+# Every variant below but "a" and the "-dens4e-4" probes was recorded with the code network's
+# velocity between the Gaussians.
 NETQ = ["model.query_code=network"]
-VARIANTS = {"a": [], **{name: [*changes, *NETQ] for name, changes in _BEFORE_QUERY.items()}}
+# "-dens4e-4": this version with the densification's gradient threshold at 4e-4 (5e-4 by
+# default), the full model and the deformation-only one (section 0e, "stretch").
+DENS4 = ["densify.grad_threshold=0.0004"]
+VARIANTS = {"a": [], "a-dens4e-4": DENS4, "deform-only-dens4e-4": ["model.ablation=deform-only", *DENS4],
+            **{name: [*changes, *NETQ] for name, changes in _BEFORE_QUERY.items()}}
 # Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
 # the numba backend's compiled preparation and photometric loss. The kernels changed every
 # training's rounding, which moves toss's extrapolation by several dB either way (FIDELITY.md,
