@@ -26,7 +26,7 @@ from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_core.motion import N_BASIS, carry_start, init_motion_params, mlp_layers, network_shapes
 from velogauss_fast.motion import carry
 from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.coefficients import coefficients, masked, mixing_weights, motion_patterns
+from velogauss_fast.motion.coefficients import coefficients, mixed_coefficients, mixing_weights
 from velogauss_fast.motion.deform import adf_residual, compose_state
 from velogauss_fast.motion.integrate import integrate
 from velogauss_fast.motion.params import params_to_torch
@@ -142,7 +142,7 @@ def own_mixing(params: dict, spec: MotionSpec, x0: torch.Tensor) -> torch.Tensor
 def velocity_with_mixing(params: dict, spec: MotionSpec, x: torch.Tensor, t, m: torch.Tensor) -> torch.Tensor:
     """Φ(x) (m P(t)) (N, 3), masked as VG-COEF, at points x (N, 3) with mixing weights m (N, K):
     the velocity of VG-FIELD-GAUSS, whose m is interpolated from the Gaussians' own."""
-    return velocity(x, masked(m @ motion_patterns(params, t, spec.config), spec.config.mask))
+    return velocity(x, mixed_coefficients(params, t, m, spec.config))
 
 
 def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):

@@ -27,7 +27,13 @@ def coefficients(params, t, z, cfg):
     """
     check_time("t", t)
     check_array("z", z, (None, params["mix"][0][0].shape[0]))
-    return masked(mixing_weights(params, z) @ motion_patterns(params, t, cfg), cfg.mask)
+    return mixed_coefficients(params, t, mixing_weights(params, z), cfg)
+
+
+def mixed_coefficients(params, t, m, cfg):
+    """w = m P(t), masked by cfg.mask (VG-COEF from given mixing weights m (N, K); VG-FIELD-GAUSS
+    passes interpolated ones) -> (N, 12). Unchecked: callers have validated t and m."""
+    return masked(m @ motion_patterns(params, t, cfg), cfg.mask)
 
 
 def mixing_logits(params, z):

@@ -18,8 +18,8 @@ def mixing_between(x, centres, weights, k=GAUSSIAN_FIELD_NEIGHBOURS, power=GAUSS
     mixing weights (rows of static Gaussians zero) -> (M, K). kappa_i = d_i^-power / sum_j
     d_j^-power over the neighbours, d_i = max(|x - c_i|, GAUSSIAN_FIELD_DISTANCE_FLOOR);
     min(k, N) neighbours; a tie at the k-th distance goes to the lower index here (the spec
-    leaves it open). Non-finite or wrongly shaped input, or no
-    centres for a query, raises ValueError.
+    leaves it open). Non-finite or wrongly shaped input, or no centres for a query, raises
+    ValueError.
     """
     check_array("x", x, (None, 3))
     check_array("centres", centres, (None, 3))
