@@ -11,7 +11,8 @@ composite those pairs (a third, gsplat, lives in backends/gsplat_backend.py):
   order and each one's row spans, keeping a running T per pixel; the backward walks
   them in reverse. No pair table, no sort; float64 throughout. Each view's VG-COV,
   VG-PROJ and VG-SH run in compiled kernels too (backends/numba_projection.py, `prepare_numba`),
-  unless the camera needs a gradient, which they do not give.
+  unless the camera needs a gradient, which they do not give, and so do its row spans
+  (backends/numba_spans.py).
 * "torch" (any device; the pair table in `velogauss_fast.spans`, the compositing and its
   backward in `velogauss_fast.composite`): the pairs are listed with vectorised index
   arithmetic (one record per Gaussian and box row), sorted once by (pixel, depth), and
@@ -175,23 +176,27 @@ def rasterize(
 
         return rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height,
                                 background, sh_degree, mode)
-    prepare = None
-    if backend == "numba" and not (viewmat.requires_grad or K.requires_grad):
-        from velogauss_fast.backends.numba_projection import prepare_numba as prepare
+    prepare = spans = None
+    if backend == "numba":
+        from velogauss_fast.backends.numba_spans import row_spans_numba as spans
+
+        if not (viewmat.requires_grad or K.requires_grad):
+            from velogauss_fast.backends.numba_projection import prepare_numba as prepare
     return render_with_composite(means, quats, scales, opacities, colors, viewmat, K, width, height, background,
-                                 sh_degree, COMPOSITES[backend], mode, prepare)
+                                 sh_degree, COMPOSITES[backend], mode, prepare, spans)
 
 
 def render_with_composite(means, quats, scales, opacities, colors, viewmat, K, width, height, background, sh_degree,
-                          composite, mode="classic", prepare=None):
+                          composite, mode="classic", prepare=None, spans=None):
     """`rasterize` on validated input with one of the COMPOSITES (the benchmark times each
     through this one pipeline) after `prepare` (None: `prepare_torch`; or the numba
-    backend's `prepare_numba`)."""
+    backend's `prepare_numba`) and `spans` (None: `velogauss_fast.spans.row_spans`; or the
+    numba backend's `row_spans_numba`)."""
     prepare = prepare_torch if prepare is None else prepare
     proj, rgb, opacities = prepare(means, quats, scales, opacities, colors, viewmat, K, width, height, sh_degree,
                                    mode)
-    spans = row_spans(proj["mean2d"], proj["conic"], opacities, proj["radius"], proj["depth"], proj["valid"],
-                      width, height)
+    spans = (row_spans if spans is None else spans)(proj["mean2d"], proj["conic"], opacities, proj["radius"],
+                                                    proj["depth"], proj["valid"], width, height)
     image, T = composite(proj["mean2d"], proj["conic"], opacities, rgb, background, spans)
     meta = dict(proj, colors=rgb, n_pairs=spans.n_box)
     return image.reshape(height, width, 3), (1 - T).reshape(height, width, 1), meta

@@ -1,9 +1,9 @@
 """Compiled CPU compositing for `velogauss_fast.raster.rasterize` (backend="numba").
 
-Each view's projection, covariance, colours and culling run in `numba_projection`; the
-row spans are the torch backend's own; the compositing of VG-RENDER's pairs runs in the
-kernels of `numba_kernels`, forward and an analytic backward. No pair table is built: backward revisits the pairs through the
-same row spans and saves, per pixel, the final T and the rank of the last blended
+Each view's projection, covariance, colours and culling run in `numba_projection`, its
+row spans in `numba_spans` (the torch backend's, compiled), and the compositing of
+VG-RENDER's pairs in the kernels of `numba_kernels`, forward and an analytic backward. No
+pair table is built: backward revisits the pairs through the same row spans and saves, per pixel, the final T and the rank of the last blended
 Gaussian and, per pair, its alpha (one float64 in visiting order, so the backward needs no
 exp). The kernels compute in float64 whatever the working dtype (inputs are cast up,
 outputs cast back), so a float32 render differs from the reference only by its float32
