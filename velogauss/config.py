@@ -269,6 +269,10 @@ class DensifyConfig:
     prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # at 1 every Gaussian would be pruned
     opacity_reset_every: Period = "auto"
     max_gaussians: Count = 10000
+    # "fixed": up to max_gaussians at every round; "linear": the cap rises from 0 at `start`
+    # to max_gaussians at `until`, so a scene that would reach it early spreads its budget
+    # over the window instead of spending it before the motion has settled.
+    cap_schedule: Literal["fixed", "linear"] = "fixed"
     static_every: Period = "auto"  # re-detect particles that do not move
 
 

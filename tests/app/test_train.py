@@ -13,13 +13,13 @@ import pytest
 import torch
 
 from velogauss import io_utils
-from velogauss.config import SCHEDULE, load_config, resolve_schedule, resolve_transport
+from velogauss.config import SCHEDULE, DensifyConfig, load_config, resolve_schedule, resolve_transport
 from velogauss.data import load_scene
 from velogauss.model import build_model, scene_profile
 from velogauss.scenes import make_scene
 from velogauss.train import loop
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, load_model
-from velogauss.train.densify import DensityStats, densify_and_prune
+from velogauss.train.densify import DensityStats, cap_at, densify_and_prune
 from velogauss.train.optim import make_optimizer
 from velogauss.train.sampling import FrameSampler
 from velogauss.train.static import detect_moving, pixel_footprint
@@ -134,7 +134,7 @@ def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
         g.log_scales[:2] = np.log(10.0)  # two large ones among the hot: split, not cloned
         g.log_scales[2:5] = np.log(0.01)  # three small ones: cloned (0.01 < percent_dense * 4)
     out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, after_reset=False,
-                            generator=torch.Generator().manual_seed(0))
+                            generator=torch.Generator().manual_seed(0), done=cfg.densify.start + 1)
     assert out == {"cloned": 3, "split": 2, "pruned": 3, "total": n - 3 - 2 + 3 + 4}
     assert len(g) == len(model.moving) == out["total"]
     # The kept rows keep their values and moments, in order; new rows start with zero moments.
@@ -149,20 +149,33 @@ def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
     assert torch.allclose(children, torch.full_like(children, 10.0 / 1.6))
 
 
-def test_densify_respects_the_gaussian_budget(tiny_scene):
-    cfg, model = _model(tiny_scene, [f"densify.max_gaussians={300 + 4}"])
+@pytest.mark.parametrize("schedule, done_share, room", [("fixed", 0.1, 4), ("linear", 1.0, 4),
+                                                       ("linear", 2.0, 4), ("linear", 0.998, 3)])
+def test_densify_respects_the_gaussian_budget(tiny_scene, schedule, done_share, room):
+    # The cap is max_gaussians, or under "linear" its share (done - start) / (until - start):
+    # here 304 Gaussians at the window's end and after it, int(304 * 0.998) = 303 just before.
+    cfg, model = _model(tiny_scene, [f"densify.max_gaussians={300 + 4}", f"densify.cap_schedule={schedule}",
+                                     "densify.start=100", "densify.until=600"])
     opt = make_optimizer(model, cfg.train, extent=4.0)
     n = len(model.gaussians)
+    assert n == 300
     stats = DensityStats(n)
     stats.grad[:] = torch.linspace(1.0, 2.0, n)  # every Gaussian hot, the last ones hottest
     stats.count[:] = 1.0
     with torch.no_grad():
         model.gaussians.log_scales.fill_(np.log(0.01))  # all small: candidates for cloning
-    hottest = model.gaussians.means[-4:].detach().clone()
+    hottest = model.gaussians.means[-room:].detach().clone()
     out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, after_reset=False,
-                            generator=torch.Generator().manual_seed(0))
-    assert out["total"] == n + 4 and out["cloned"] == 4
-    assert torch.equal(model.gaussians.means[-4:], hottest)
+                            generator=torch.Generator().manual_seed(0), done=round(100 + 500 * done_share))
+    assert out["total"] == n + room and out["cloned"] == room
+    assert torch.equal(model.gaussians.means[-room:], hottest)
+
+
+@pytest.mark.parametrize("done, cap", [(0, 0), (100, 0), (350, 5000), (599, 9980), (600, 10000), (3000, 10000)])
+def test_linear_cap_rises_over_the_densification_window(done, cap):
+    d = DensifyConfig(start=100, until=600, cap_schedule="linear")
+    assert cap_at(d, done) == cap
+    assert cap_at(DensifyConfig(start=100, until=600), done) == 10000
 
 
 def test_static_detection(tiny_scene):

@@ -157,7 +157,10 @@ NETQ = ["model.query_code=network"]
 # "-dens4e-4": this version with the densification's gradient threshold at 4e-4 (5e-4 by
 # default), the full model and the deformation-only one (section 0e, "stretch").
 DENS4 = ["densify.grad_threshold=0.0004"]
+# "-dens4e-4-ramp": 4e-4 with the cap rising over the densification window.
+RAMP = [*DENS4, "densify.cap_schedule=linear"]
 VARIANTS = {"a": [], "a-dens4e-4": DENS4, "deform-only-dens4e-4": ["model.ablation=deform-only", *DENS4],
+            "a-dens4e-4-ramp": RAMP, "deform-only-dens4e-4-ramp": ["model.ablation=deform-only", *RAMP],
             **{name: [*changes, *NETQ] for name, changes in _BEFORE_QUERY.items()}}
 # Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
 # the numba backend's compiled preparation and photometric loss. The kernels changed every

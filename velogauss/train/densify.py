@@ -9,7 +9,8 @@ size, as 3DGS and gsplat measure it). Every `densify.every` iterations in
 - split those above that size into two, sampled from the Gaussian, scales / 1.6;
 - prune the Gaussians with opacity below `prune_opacity`, and, after the first opacity
   reset, those larger than a tenth of the extent in the world or 20 px on screen.
-The count never exceeds `max_gaussians`: candidates are taken by decreasing gradient.
+The count never exceeds `max_gaussians` (under `cap_schedule` "linear", its share of it so
+far, `cap_at`): candidates are taken by decreasing gradient.
 Every `opacity_reset_every` iterations opacities are clamped to at most 0.01, so that
 floaters must earn their opacity back (3DGS).
 """
@@ -58,11 +59,12 @@ class DensityStats:
         self.grad, self.count, self.max_radius = state["grad"], state["count"], state["max_radius"]
 
 
-def densify_and_prune(model, optimizer, stats, cfg, extent, after_reset, generator):
+def densify_and_prune(model, optimizer, stats, cfg, extent, after_reset, generator, done):
     """One round of clone/split/prune (see the module docstring); resets `stats`.
 
     cfg: `DensifyConfig`; extent: camera extent (world units); after_reset: an opacity reset
-    has happened (enables the size pruning); generator: torch.Generator for the split samples.
+    has happened (enables the size pruning); generator: torch.Generator for the split samples;
+    done: the iterations done (the cap's share under cfg.cap_schedule "linear", `cap_at`).
     Returns {"cloned", "split", "pruned", "total"}.
     """
     g = model.gaussians
@@ -74,7 +76,7 @@ def densify_and_prune(model, optimizer, stats, cfg, extent, after_reset, generat
         hot = grads >= cfg.grad_threshold
         clone = hot & small
         split = hot & ~small
-        budget = max(0, cfg.max_gaussians - n)
+        budget = max(0, cap_at(cfg, done) - n)
         clone, split = _within_budget(grads, clone, split, budget)
 
         prune = g.opacities < cfg.prune_opacity
@@ -93,6 +95,14 @@ def densify_and_prune(model, optimizer, stats, cfg, extent, after_reset, generat
         stats.reset(len(g), device=stats.grad.device)
     return {"cloned": int(clone.sum()), "split": int(split.sum()), "pruned": int((prune & ~split).sum()),
             "total": len(g)}
+
+
+def cap_at(cfg, done):
+    """The most Gaussians a densification round after `done` iterations may leave: max_gaussians,
+    or under cap_schedule "linear" its share (done - start) / (until - start) of it."""
+    if cfg.cap_schedule == "fixed":
+        return cfg.max_gaussians
+    return int(cfg.max_gaussians * min(1.0, max(0.0, (done - cfg.start) / max(1, cfg.until - cfg.start))))
 
 
 def reset_opacity(model, optimizer):

@@ -304,7 +304,7 @@ class _Loop:
         d, model = self.cfg.densify, self.model
         if d.start < done <= d.until and done % d.every == 0:
             densify_and_prune(model, self.optimizer, self.stats, d, self.extent, self.extra["after_reset"],
-                              torch_generator(self.rng))
+                              torch_generator(self.rng), done)
         # A reset sets every opacity low, and the schedule gives the Gaussians one period to
         # recover before the next; a reset with less than that left would end the run on
         # faded Gaussians (train.iterations=2000 with the other defaults reset at the very
