@@ -57,6 +57,11 @@ ALPHA_MIN = 1.0 / 255.0
 # Front-to-back blending stops before the splat that would bring the transmittance below
 # this: anything behind contributes less than 1e-4 of the pixel. 3DGS uses 1e-4.
 TRANSMITTANCE_MIN = 1e-4
+# Slack (in units of sigma) added to the row spans' pruning bound log(opacity / ALPHA_MIN)
+# (VG-RENDER, velogauss_fast.spans): far above the float64 rounding of the bound itself, it
+# keeps the pruning conservative when the compositing recomputes alpha in the working dtype,
+# and above a last-bit difference of the bound's logarithm between the torch and compiled spans.
+SPAN_SIGMA_SLACK = 0.01
 
 # --- Photometric loss and metrics (VG-LOSS, VG-METRIC) ---------------------------------
 # D-SSIM weight in the photometric loss (1 - lambda) * L1 + lambda * (1 - SSIM); 3DGS's 0.2.

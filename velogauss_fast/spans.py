@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import torch
 
-from velogauss_core.constants import ALPHA_MIN
+from velogauss_core.constants import ALPHA_MIN, SPAN_SIGMA_SLACK
 
 
 class Spans(NamedTuple):
@@ -49,12 +49,7 @@ def row_spans(mean2d, conic, opacity, radius, depth, valid, width, height):
     """
     with torch.no_grad():
         f64 = torch.float64
-        ids = torch.nonzero(valid).squeeze(1)
-        # Valid depths are >= NEAR_PLANE > 0, and positive floats order as their bit
-        # patterns: a stable (radix) sort of the integer view is the stable depth order,
-        # ~10x faster on the CPU than sorting the floats.
-        d = depth.index_select(0, ids)
-        ids = ids.index_select(0, torch.sort(d.view(_BITS[d.dtype]), stable=True).indices)
+        ids = depth_order(depth, valid)
         # One gather of the per-Gaussian inputs, then contiguous columns.
         cols = torch.cat([mean2d, conic, opacity[:, None], radius[:, None].to(mean2d.dtype)], dim=1)
         u, v, a, b, c, o, r = cols.index_select(0, ids).T.contiguous()
@@ -69,6 +64,18 @@ def row_spans(mean2d, conic, opacity, radius, depth, valid, width, height):
         geom = torch.stack([u, v, a, b, c, o, 2 * a * s, det, 1 / a_safe, b / a_safe, definite.to(f64),
                             x0.to(f64), x1.to(f64), y0.to(f64), y1.to(f64)], dim=1)
     return Spans(ids, geom, width, height, n_box)
+
+
+def depth_order(depth, valid):
+    """Indices (n,) int64 of the valid Gaussians (valid (N,) bool) by increasing depth (N,),
+    ties in index order: the order VG-RENDER composites them in."""
+    with torch.no_grad():
+        ids = torch.nonzero(valid).squeeze(1)
+        # Valid depths are >= NEAR_PLANE > 0, and positive floats order as their bit
+        # patterns: a stable (radix) sort of the integer view is the stable depth order,
+        # ~10x faster on the CPU than sorting the floats.
+        d = depth.index_select(0, ids)
+        return ids.index_select(0, torch.sort(d.view(_BITS[d.dtype]), stable=True).indices)
 
 
 class Pairs(NamedTuple):
@@ -130,17 +137,11 @@ def pair_table(spans):
     return Pairs(gid, pix, offsets, spans.width, spans.height, spans.n_box)
 
 
-# Slack (in units of sigma) added to the pruning bound log(opacity / ALPHA_MIN): far above
-# the float64 rounding of the bound itself, it keeps pruning conservative when the
-# compositing later recomputes alpha in the working dtype (see `_span_margin`).
-_SPAN_SIGMA_SLACK = 0.01
-
-
 def _span_margin(a, b, c, r, dtype):
     """Slack on sigma covering its rounding in `dtype`: sigma sums terms up to
     (a + c + 2|b|)(r + 1)^2 / 2 (offsets up to the box radius), each rounded to a few eps."""
     eps = torch.finfo(dtype).eps
-    return _SPAN_SIGMA_SLACK + 8 * eps * (a.abs() + c.abs() + 2 * b.abs()) * (r + 1) ** 2
+    return SPAN_SIGMA_SLACK + 8 * eps * (a.abs() + c.abs() + 2 * b.abs()) * (r + 1) ** 2
 
 
 def _centre_span(lo, hi, n):

@@ -3,10 +3,10 @@
 The torch form computes the spans of a view's Gaussians in about seventy small tensor
 operations; here each valid Gaussian is one pass of scalar code with the same operations in
 the same dtypes: the box in the working dtype (so its pixel membership is the reference's,
-bit for bit), the span parameters in float64. The depth order is the same stable sort, in
-torch. The logarithm of the pruning bound may differ from torch's in its last bit; the
-bound's margin (`spans._span_margin`) is far above that, so the pairs the compositing
-blends are the same.
+bit for bit), the span parameters in float64. The depth order is the same function
+(`spans.depth_order`). The logarithm of the pruning bound may differ from torch's in its
+last bit; the bound's margin (SPAN_SIGMA_SLACK and more) is far above that, so the pairs the
+compositing blends are the same.
 """
 
 import math
@@ -15,8 +15,8 @@ import numba
 import numpy as np
 import torch
 
-from velogauss_core.constants import ALPHA_MIN
-from velogauss_fast.spans import _BITS, _SPAN_SIGMA_SLACK, SPAN_COLUMNS, Spans
+from velogauss_core.constants import ALPHA_MIN, SPAN_SIGMA_SLACK
+from velogauss_fast.spans import SPAN_COLUMNS, Spans, depth_order
 
 # As numba_kernels: no Python division checks, IEEE rounding (no fastmath), cached on disk,
 # the GIL released.
@@ -63,7 +63,7 @@ def spans_forward(ids, mean2d, conic, opacity, radius, width, height, eps, half,
         n_box += max(x1 - x0 + 1, 0) * max(y1 - y0 + 1, 0)
         u, v, r = np.float64(u), np.float64(v), np.float64(r)
         a, b, c, o = np.float64(conic[g, 0]), np.float64(conic[g, 1]), np.float64(conic[g, 2]), np.float64(opacity[g])
-        margin = _SPAN_SIGMA_SLACK + 8 * eps * (abs(a) + abs(c) + 2 * abs(b)) * ((r + 1) * (r + 1))
+        margin = SPAN_SIGMA_SLACK + 8 * eps * (abs(a) + abs(c) + 2 * abs(b)) * ((r + 1) * (r + 1))
         s = math.log(o / ALPHA_MIN) + margin
         det = a * c - b * b
         definite = a > 0 and det > 0
@@ -79,9 +79,7 @@ def spans_forward(ids, mean2d, conic, opacity, radius, width, height, eps, half,
 def row_spans_numba(mean2d, conic, opacity, radius, depth, valid, width, height):
     """`velogauss_fast.spans.row_spans` (same arguments, same Spans) in the kernel: CPU tensors."""
     with torch.no_grad():
-        ids = torch.nonzero(valid).squeeze(1)
-        d = depth.index_select(0, ids)
-        ids = ids.index_select(0, torch.sort(d.view(_BITS[d.dtype]), stable=True).indices)
+        ids = depth_order(depth, valid)
         dtype = np.dtype(str(mean2d.dtype).removeprefix("torch."))
         geom = np.empty((ids.shape[0], len(SPAN_COLUMNS)))
         n_box = spans_forward(ids.numpy(), *(t.detach().contiguous().numpy() for t in (mean2d, conic, opacity)),
