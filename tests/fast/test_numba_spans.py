@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from tests.fast.test_numba_backend import spans_of
 from tests.fast.render_cases import random_scene
 from velogauss_fast.backends.numba_spans import row_spans_numba
+from velogauss_fast.raster import rasterize
 from velogauss_fast.spans import SPAN_COLUMNS, pair_table, row_spans
 
 TWO_AS = SPAN_COLUMNS.index("two_as")
@@ -82,3 +83,19 @@ def test_no_valid_gaussian_gives_empty_spans():
     fast, ref = spans_both(proj, torch.full((n,), 0.5), 8, 8)
     assert fast.geom.shape == (0, len(SPAN_COLUMNS)) and fast.n_box == 0
     assert_same_spans(fast, ref)
+
+
+@pytest.mark.spec("VG-RENDER")
+@pytest.mark.parametrize("dtype, atol", [(torch.float16, 2e-2), (torch.bfloat16, 1e-1)])
+def test_half_precision_renders_through_the_torch_spans(dtype, atol):
+    # numba compiles no half-precision arithmetic: such a render takes the torch form of the
+    # spans, and the numba backend's image is its float32 image to the dtype's precision.
+    rng = np.random.default_rng(3)
+    scene = random_scene(rng, 30, 20, 16, scale_px=(0.5, 4.0))
+    args = [scene[k] for k in ("means", "quats", "scales", "opacities", "colors", "viewmat", "K")]
+    images = {}
+    for d in (dtype, torch.float32):
+        t = [torch.as_tensor(a, dtype=d) for a in args]
+        images[d] = rasterize(*t, scene["width"], scene["height"], backend="numba")[0]
+    assert images[dtype].dtype == dtype
+    torch.testing.assert_close(images[dtype].float(), images[torch.float32], rtol=0.0, atol=atol)

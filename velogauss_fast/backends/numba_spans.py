@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from velogauss_core.constants import ALPHA_MIN, SPAN_SIGMA_SLACK
-from velogauss_fast.spans import SPAN_COLUMNS, Spans, depth_order
+from velogauss_fast.spans import SPAN_COLUMNS, Spans, depth_order, row_spans
 
 # As numba_kernels: no Python division checks, IEEE rounding (no fastmath), cached on disk,
 # the GIL released.
@@ -77,7 +77,11 @@ def spans_forward(ids, mean2d, conic, opacity, radius, width, height, eps, half,
 
 
 def row_spans_numba(mean2d, conic, opacity, radius, depth, valid, width, height):
-    """`velogauss_fast.spans.row_spans` (same arguments, same Spans) in the kernel: CPU tensors."""
+    """`velogauss_fast.spans.row_spans` (same arguments, same Spans) in the kernel: CPU tensors.
+    A half-precision working dtype (float16, bfloat16), which numba does not compile, takes
+    the torch form."""
+    if mean2d.dtype not in (torch.float32, torch.float64):
+        return row_spans(mean2d, conic, opacity, radius, depth, valid, width, height)
     with torch.no_grad():
         ids = depth_order(depth, valid)
         dtype = np.dtype(str(mean2d.dtype).removeprefix("torch."))
