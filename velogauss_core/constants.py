@@ -153,8 +153,9 @@ GAUSSIAN_FIELD_POWER = 2
 # instead of dividing by zero. float32 positions of O(1) carry rounding of about 1e-7, so
 # closer distances are noise; 1e-6 squared is far inside float32's range.
 GAUSSIAN_FIELD_DISTANCE_FLOOR = 1e-6
-# The fast path takes the query points in chunks of at most this many (query, Gaussian)
-# distances: 2^24 float32 entries are 64 MB whatever the number of Gaussians.
+# The fast path's topk search (off the CPU, where the k-d tree does not run) takes the query
+# points in chunks of at most this many (query, Gaussian) distances: 2^24 float32 entries
+# are 64 MB whatever the number of Gaussians.
 GAUSSIAN_FIELD_CHUNK = 2 ** 24
 
 # --- Data loading (velogauss.data) -----------------------------------------------------

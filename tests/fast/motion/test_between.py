@@ -42,12 +42,39 @@ def test_reference_vs_fast(device, seed, m, n, k, power):
 
 @pytest.mark.spec("VG-FIELD-GAUSS")
 def test_chunks_give_the_whole(monkeypatch):
-    # 40 queries over 30 centres in chunks of 2 queries (2 * 3 * 30 distances each).
+    # The topk search (any device) over 40 queries and 30 centres, in chunks of 2 queries
+    # (2 * 3 * 30 distances each).
     x, centres, weights = (torch.tensor(a) for a in _inputs(3, 40, 30))
-    whole = between.mixing_between(x, centres, weights)
+    whole = between.mixing_between(x, centres, weights, search="topk")
     monkeypatch.setattr(between, "GAUSSIAN_FIELD_CHUNK", 180)
     assert len(x.split(max(1, between.GAUSSIAN_FIELD_CHUNK // (3 * 30)))) == 20
-    torch.testing.assert_close(between.mixing_between(x, centres, weights), whole, rtol=0, atol=0)
+    torch.testing.assert_close(between.mixing_between(x, centres, weights, search="topk"), whole, rtol=0, atol=0)
+
+
+@pytest.mark.spec("VG-FIELD-GAUSS")
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("seed, m, n, k", [(8, 200, 1000, 8), (7, 50, 7, 8), (7, 20, 40, 1)])
+def test_tree_and_topk_find_the_same_neighbours(dtype, seed, m, n, k):
+    # The k-d tree (the CPU's default) and the chunked topk find the same neighbour sets
+    # wherever the k-th and (k+1)-th distances are apart, and so the same weights to the
+    # last bit (the distances are then computed by the same operations).
+    x, centres, weights = _inputs(seed, m, n)
+    assert _clear_gap(x, centres, k, 1e-4)  # far above float32's rounding of the distances
+    x, centres, weights = (torch.tensor(a, dtype=dtype) for a in (x, centres, weights))
+    near = {s: between.nearest_centres(x, centres, min(k, n), s).sort(1).values for s in ("tree", "topk")}
+    assert torch.equal(near["tree"], near["topk"])
+    out = {s: between.mixing_between(x, centres, weights, k, search=s) for s in ("tree", "topk", "auto")}
+    assert torch.equal(out["tree"], out["topk"]) and torch.equal(out["auto"], out["tree"])
+
+
+@pytest.mark.spec("VG-FIELD-GAUSS")
+def test_tree_search_needs_cpu_tensors_and_a_known_name(device):
+    x, centres, _ = (torch.tensor(a, device=device) for a in _inputs(0, 3, 5))
+    with pytest.raises(ValueError, match="^search: expected one of"):
+        between.nearest_centres(x, centres, 2, "kd")
+    if device != "cpu":
+        with pytest.raises(ValueError, match="^search: 'tree' needs CPU tensors"):
+            between.nearest_centres(x, centres, 2, "tree")
 
 
 @pytest.mark.spec("VG-FIELD-GAUSS")
