@@ -203,9 +203,13 @@ class TrainConfig:
     # motion over on toss (extrapolation 16.6 dB against 20.5 dB at 1.0), and at 10 the
     # velocity fits the paths closer than at 1.0 (benchmarks/FIDELITY.md, "Defaults").
     lambda_adf: _float(ge=0.0) = 10.0
-    # Iteration at which the ADF starts learning; -1: once the curriculum has opened the
-    # whole window (warmup + curriculum), or with the motion for deform-only.
-    adf_start: _int(ge=-1) = -1
+    # Iteration at which the ADF starts learning. "auto": with the motion (the warm-up's end)
+    # for deform-only, scheme "adf-step" and the time network's patterns, else once the
+    # curriculum has opened the whole window (velogauss.train.loop, benchmarks/FIDELITY.md 0f);
+    # "window": the rule before that (with the motion for deform-only and "adf-step" only); -1,
+    # what the configs of that time hold, is "window", so that they resume as they trained;
+    # n >= 0: iteration n.
+    adf_start: Union[Literal["auto", "window"], _int(ge=-1)] = "auto"
     # Scheme "adf-step": weight of VG-LOSS-CARRY (the velocity fitted to the ADF's paths);
     # 0 disables it, a negative one would reward the gap.
     lambda_carry: _float(ge=0.0) = 0.0

@@ -457,6 +457,21 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.parametrize("overrides, start", [
+    ([], "window"),  # rigid patterns (toss): the patterns learn the motion before the ADF
+    (["model.patterns=mlp"], "warmup"),  # the time network: the ADF starts with the motion
+    (["model.patterns=mlp", "train.adf_start=window"], "window"),
+    (["model.patterns=mlp", "train.adf_start=-1"], "window"),  # what configs before "auto" hold
+    (["model.ablation=deform-only"], "warmup"),  # its ADF is the motion
+    (["model.patterns=mlp", "train.adf_start=5"], 5),
+])
+def test_the_adf_starts_as_the_patterns_call_for(tiny_scene, tmp_path, overrides, start):
+    trainer, _ = loop.prepare(load_config(None, [*TINY, "train.threads=1", *overrides]), tiny_scene, tmp_path)
+    t = trainer.cfg.train
+    assert trainer.adf_start == {"warmup": t.warmup, "window": t.warmup + t.curriculum}.get(start, start)
+    assert trainer.spec_at(trainer.adf_start - 1).adf is False and trainer.spec_at(trainer.adf_start).adf
+
+
 def test_one_thread_computes_the_side_losses_inline(tiny_scene, tmp_path):
     trainer, _ = loop.prepare(load_config(None, [*TINY, "train.threads=1"]), tiny_scene, tmp_path)
     assert not trainer.side_worker

@@ -171,9 +171,18 @@ class _Loop:
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
         # deform-only has no velocity to learn first: its ADF is the motion and starts with it.
         # Under scheme "adf-step" the ADF is the motion inside the window (VG-CARRY): it starts with the motion too.
-        adf_first = self.spec.velocity is None or self.spec.scheme == "adf-step"
+        # So does it under the time network's patterns (the deforming scenes: stretch, shear,
+        # grow), where it refines the deformation from the start: stretch's interpolation rose
+        # 0.66 dB (4 seeds), shear's 0.69 dB with its velocity error 0.035 / 0.026 -> 0.026 /
+        # 0.017. Rigid and oscillating patterns wait until the curriculum has opened the window,
+        # so that they, not the ADF, learn the motion: from the warm-up's end multi's velocity
+        # error went from 0.119 to 0.174 (benchmarks/FIDELITY.md, section 0f).
+        # "window" (and -1, configs written before "auto") keeps the rule before that.
+        rule = cfg.train.adf_start
+        adf_first = (self.spec.velocity is None or self.spec.scheme == "adf-step"
+                     or (rule == "auto" and self.spec.velocity == "affine" and self.spec.config.pattern_form == "mlp"))
         default_start = cfg.train.warmup if adf_first else cfg.train.warmup + cfg.train.curriculum
-        self.adf_start = default_start if cfg.train.adf_start < 0 else cfg.train.adf_start
+        self.adf_start = rule if isinstance(rule, int) and rule >= 0 else default_start
         # Rigid patterns anchored on the body's centre (velogauss.train.centres): the mask that
         # holds their first knot, None when the centres are learned. It applies once the
         # centres are anchored (extra["centres_anchored"], kept in the checkpoint): a run saved
@@ -276,9 +285,10 @@ class _Loop:
         return self.spec if not self.spec.adf or it >= self.adf_start else self.spec.without_adf()
 
     def freeze_motion(self, it):
-        """Motion networks train from the warm-up's end, the ADF from `adf_start` (default: once
-        the curriculum has opened the whole window, so the velocity, not the ADF, learns the
-        motion; the ADF then refines what the affine velocity cannot represent).
+        """Motion networks train from the warm-up's end, the ADF from `adf_start` (by default
+        with them under the time network's patterns, else once the curriculum has opened the
+        whole window, so that the velocity, not the ADF, learns the motion; the ADF then
+        refines what the affine velocity cannot represent).
 
         Frozen parameters get no gradient at all: a zero gradient would still advance Adam's
         step count, and its bias correction would later inflate their first real updates.
