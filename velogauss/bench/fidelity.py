@@ -157,8 +157,6 @@ NETQ = ["model.query_code=network"]
 # "-dens4e-4": this version with the densification's gradient threshold at 4e-4 (5e-4 by
 # default), the full model and the deformation-only one (section 0e, "stretch").
 DENS4 = ["densify.grad_threshold=0.0004"]
-# "a-adf200": the ADF learning from the warm-up's end (iteration 200), as deform-only's does,
-# instead of once the curriculum has opened the window (stretch's miss, section 0f).
 # "-dens4e-4-ramp": 4e-4 with the cap rising over the densification window.
 RAMP = [*DENS4, "densify.cap_schedule=linear"]
 # "a-window": the version before the ADF started with the motion under the time network's
@@ -169,6 +167,8 @@ _BEFORE_ADF_RULE = {"a-window": [], "a-dens4e-4": DENS4, "deform-only-dens4e-4":
                     **{name: [*changes, *NETQ] for name, changes in _BEFORE_QUERY.items()}}
 # Every variant of _BEFORE_ADF_RULE keeps that rule.
 ADF_WINDOW = ["train.adf_start=window"]
+# "a-adf200": the ADF learning from the warm-up's end (iteration 200), as deform-only's does,
+# instead of once the curriculum has opened the window (stretch's miss, section 0f);
 # "a-no-gpc-f": the physics losses' ablation at this version.
 VARIANTS = {"a": [], "a-adf200": ["train.adf_start=200"], "a-no-gpc-f": ["model.ablation=no-gpc"],
             **{name: [*changes, *ADF_WINDOW] for name, changes in _BEFORE_ADF_RULE.items()}}

@@ -84,9 +84,8 @@ def row_spans_numba(mean2d, conic, opacity, radius, depth, valid, width, height)
         return row_spans(mean2d, conic, opacity, radius, depth, valid, width, height)
     with torch.no_grad():
         ids = depth_order(depth, valid)
-        dtype = np.dtype(str(mean2d.dtype).removeprefix("torch."))
+        m, c, o = (t.detach().contiguous().numpy() for t in (mean2d, conic, opacity))
         geom = np.empty((ids.shape[0], len(SPAN_COLUMNS)))
-        n_box = spans_forward(ids.numpy(), *(t.detach().contiguous().numpy() for t in (mean2d, conic, opacity)),
-                              radius.to(mean2d.dtype).numpy(), width, height, float(np.finfo(dtype).eps),
-                              dtype.type(0.5), geom)
+        n_box = spans_forward(ids.numpy(), m, c, o, radius.to(mean2d.dtype).numpy(), width, height,
+                              float(np.finfo(m.dtype).eps), m.dtype.type(0.5), geom)
     return Spans(ids, torch.from_numpy(geom), width, height, int(n_box))
