@@ -271,10 +271,13 @@ def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, m
         return out
 
     monkeypatch.setattr(loop._Loop, "step", step_then_interrupt)
+    # The handler the training found is put back, whatever it was (the test process's is
+    # usually Python's default, but a library loaded by an earlier test may have set another).
+    handler = signal.getsignal(signal.SIGINT)
     with pytest.raises(KeyboardInterrupt, match="iteration 6"):
         loop.train(cfg, tiny_scene, tmp_path / "cut", progress=False)
     assert load_checkpoint(tmp_path / "cut")["iteration"] == 6
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is handler
     monkeypatch.setattr(loop._Loop, "step", step)
     resumed = loop.train(cfg, tiny_scene, tmp_path / "cut", resume=True, progress=False)
     # Same draws, same densification, same numbers: bit for bit on the CPU.
@@ -433,12 +436,17 @@ def _trains_and_reloads(cfg, scene, run_dir):
 def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, tmp_path, monkeypatch):
     # The physics, carry and mixing losses run in a worker thread beside the renders
     # (velogauss.train.side); their draws come first and their gradients join in a fixed
-    # order, so whether a worker ran changes no number of the training.
+    # order, so whether a worker ran changes no number of the training. With the worker, the
+    # ADF's backward runs in a thread of its own too (velogauss.model.beside), from the
+    # iteration the ADF starts: the same numbers again.
+    from velogauss.model.beside import Beside
     from velogauss.train import side
 
-    ran_in = []
+    ran_in, adf_in = [], []
     traced = side.side_loss
     monkeypatch.setattr(side, "side_loss", lambda *a: (ran_in.append(threading.current_thread()), traced(*a))[1])
+    handed = Beside.start_backward
+    monkeypatch.setattr(Beside, "start_backward", lambda self, g: (adf_in.append(1), handed(self, g))[1])
     # The default threads with a budget of two (OMP_NUM_THREADS): one torch thread, as every
     # test has, and two compositing threads, so the worker (torch's own count stays 1 here).
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
@@ -448,10 +456,12 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
         trainer, _ = loop.prepare(cfg, tiny_scene, tmp_path / str(worker))
         assert trainer.side_worker
         trainer.side_worker = worker
-        losses = [trainer.step(it) for it in range(cfg.train.warmup, cfg.train.warmup + 6)]
+        first = max(cfg.train.warmup, trainer.adf_start - 3)  # 3 iterations without the ADF, 3 with it
+        losses = [trainer.step(it) for it in range(first, first + 6)]
         trained[worker] = ({k: v.detach().clone() for k, v in trainer.model.state_dict().items()}, losses)
     threads = {t is threading.main_thread() for t in ran_in}
     assert threads == {False, True}, "the side losses ran in the worker, then inline"
+    assert len(adf_in) == 3, "the ADF's backward ran beside on the worker's iterations with the ADF"
     (a, loss_a), (b, loss_b) = trained[True], trained[False]
     assert loss_a == loss_b
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

@@ -58,12 +58,15 @@ class VeloGaussModel(nn.Module):
         """The motion parameter dict (`MotionParameters.params`), None for a static scene."""
         return None if self.motion is None else self.motion.params()
 
-    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None, offset: float = 0.0):
+    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None, offset: float = 0.0,
+                 beside: bool = False):
         """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t.
 
         params: the motion parameter dict, when the caller already built it this step;
         spec: a variant of the model's spec (training skips the ADF before it learns);
-        offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY).
+        offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY);
+        beside: the ADF's backward in a thread beside the rest (training with two cores,
+        `velogauss.model.motion.gaussians_at`).
         A non-finite or non-scalar t raises ValueError.
         """
         _check_time(t)
@@ -75,7 +78,7 @@ class VeloGaussModel(nn.Module):
         params = self.motion.params() if params is None else params
         idx = torch.nonzero(self.moving).squeeze(1)
         x, q, s, xs = motion_fns.gaussians_at(params, spec, x0.index_select(0, idx), q0.index_select(0, idx),
-                                              s0.index_select(0, idx), t, offset)
+                                              s0.index_select(0, idx), t, offset, beside)
         return (x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s),
                 x0.index_copy(0, idx, xs))
 

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from velogauss.model.beside import adf_residual_beside
 from velogauss.model.spec import MotionSpec
 from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_core.motion import N_BASIS, carry_start, init_motion_params, mlp_layers, network_shapes
@@ -83,7 +84,7 @@ class MotionParameters(nn.Module):
 
 
 def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tensor, s0: torch.Tensor, t,
-                 offset: float = 0.0):
+                 offset: float = 0.0, beside: bool = False):
     """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t of the
     Gaussians whose canonical state is x0 (N, 3), q0 (N, 4) unit, s0 (N, 3) > 0.
 
@@ -95,20 +96,26 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
     spec.carry_until) carried to t by the velocity; the base means are then the means.
     offset: the signed step training draws (±spec.carry_offset), 0 in evaluation; only
     "adf-step" reads it.
+    beside: run the ADF's branch of the backward in a thread beside the integration's of the
+    affine velocity (velogauss.model.beside; the same numbers), for a caller with a second core.
     """
     cfg = spec.config
     z = physics_code(params, x0, cfg)
     if spec.scheme == "adf-step":
         x, q, s = _carried_state(params, spec, x0, q0, s0, z, t, carry_start(t, offset, spec.carry_until))
         return x, q, s, x
-    if spec.scheme == "integrate":
-        xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
-    else:
+    if spec.scheme != "integrate":
         raise ValueError(f"spec.scheme: unknown scheme {spec.scheme!r}")
+    t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
+    # Created before the integration, so that the backward reaches its join after it. The
+    # affine velocity's integration only: it reads x0 once, so that x0, like z, receives one
+    # sum from each branch and the numbers stay those of one backward (velogauss.model.beside).
+    beside = beside and spec.adf and spec.velocity == "affine" and _backward_follows(x0, z)
+    adf = adf_residual_beside(params, x0, t_adf, z, cfg) if beside else None
+    xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
     if not spec.adf:
         return xs, qs, ss, xs
-    t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
-    dx, dq, ds = adf_residual(params, x0, t_adf, z, cfg)
+    dx, dq, ds = adf_residual(params, x0, t_adf, z, cfg) if adf is None else adf.value()
     x, q, s = compose_state(xs, qs, ss, dx, dq, ds)
     return x, q, s, xs
 
@@ -183,6 +190,11 @@ def _carried_state(params, spec, x0, q0, s0, z, t, t_start):
     xv = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec.config), xs, t_start, t, spec.step,
                    spec.integrator)
     return xa + (xv - xs), qa, sa
+
+
+def _backward_follows(x0, z):
+    """Whether the ADF's inputs are in a graph that a backward will run through."""
+    return torch.is_grad_enabled() and (x0.requires_grad or z.requires_grad)
 
 
 def _integrated_state(params, spec, x0, q0, s0, z, t):

@@ -1,0 +1,104 @@
+"""One branch of the motion's backward in another thread, beside the rest of it.
+
+A training step's backward reaches the motion through the state at t, x = x* + Δx (VG-ADF-
+COMPOSE): the ADF's branch Δx = F(γ(x0), γ(t), z) (its MLP: matrix products, compute-bound)
+and the integration's branch x*(t) (VG-TRAJ: hundreds of small operations) both end at the
+canonical means x0 and the code z, and neither needs the other. torch's autograd engine runs
+a backward on the thread that called it, so the two branches run one after the other on one
+core while the other is idle or finishing the side losses (velogauss.train.side):
+`adf_residual_beside` hands the ADF's branch to a thread of its own (the side losses' one is
+often still busy then), and the integration's runs meanwhile.
+
+How: the ADF is evaluated on detached copies of x0 and z (its own small graph), and two
+autograd Functions stand in for it in the step's graph. `_Hand` sits between its output and
+the composition; the engine runs it as soon as the composition's gradient arrives (nodes run
+latest-created first, and it is created after the integration), and it submits the ADF's
+backward (`torch.autograd.grad` onto the copies and the ADF's weights) to the thread.
+`_Join` sits on x0, z and the weights, created before the integration, so the engine reaches
+it only after the integration's branch: it waits for the thread and passes the gradients on.
+
+The numbers are those of the single backward, to the last bit: the ADF's graph is the same
+operations on the same values; x0 and z each receive exactly two sums, the ADF's and the
+integration's, whose order does not change a sum of two; the code network's contributions
+still come after both (`tests/model/test_beside.py`; the training is bitwise the previous
+one, `python -m velogauss.bench.step_ratio`).
+"""
+
+import concurrent.futures
+import functools
+
+import torch
+
+from velogauss_fast.motion.deform import adf_residual
+
+
+def adf_residual_beside(params, x0, t, z, cfg):
+    """A `Beside` computing `adf_residual(params, x0, t, z, cfg)` whose backward runs in the
+    process's ADF thread. Create it before the integration's branch and call `.value()` after
+    it (see the module docstring); x0 (N, 3), z (N, L) as `adf_residual`'s."""
+    return Beside(params, x0, t, z, cfg, _thread())
+
+
+class Beside:
+    """The ADF's residual with its backward beside the integration's (`adf_residual_beside`)."""
+
+    def __init__(self, params, x0, t, z, cfg, thread):
+        self.thread, self.future = thread, None
+        weights = [w for pair in params["adf"] for w in pair]
+        self.inputs = [x0, z] + weights
+        self.wanted = [v.requires_grad for v in self.inputs]
+        x0_own, z_own = (v.detach().requires_grad_(v.requires_grad) for v in (x0, z))
+        self.leaves = [x0_own, z_own] + weights
+        with torch.enable_grad():
+            self.out = adf_residual(params, x0_own, t, z_own, cfg)
+        self.token = _Join.apply(self, *self.inputs)
+
+    def value(self):
+        """(dx (N, 3), dq (N, 4), ds (N, 3)), as `adf_residual` returns them, in the step's graph."""
+        return _Hand.apply(self, self.token)
+
+    def start_backward(self, grads):
+        """Submit the ADF's backward for the gradients `grads` of (dx, dq, ds)."""
+        leaves = [v for v, want in zip(self.leaves, self.wanted) if want]
+        self.future = self.thread.submit(torch.autograd.grad, self.out, leaves, grads, allow_unused=True)
+
+    def join_backward(self):
+        """The gradients of (x0, z, weights...) once the thread has them (None where not wanted)."""
+        found = iter(self.future.result())
+        self.future = None
+        return [next(found) if want else None for want in self.wanted]
+
+
+class _Join(torch.autograd.Function):
+    """A token in the step's graph on the ADF's inputs; its backward waits for the thread."""
+
+    @staticmethod
+    def forward(ctx, beside, *inputs):
+        ctx.beside = beside
+        return inputs[0].new_zeros(())
+
+    @staticmethod
+    def backward(ctx, _):
+        return (None, *ctx.beside.join_backward())
+
+
+class _Hand(torch.autograd.Function):
+    """The ADF's output in the step's graph; its backward starts the thread's."""
+
+    @staticmethod
+    def forward(ctx, beside, token):
+        ctx.beside = beside
+        ctx.token = (token.dtype, token.device)
+        return tuple(o.detach() for o in beside.out)
+
+    @staticmethod
+    def backward(ctx, *grads):
+        ctx.beside.start_backward(grads)
+        dtype, device = ctx.token
+        return None, torch.zeros((), dtype=dtype, device=device)
+
+
+@functools.cache
+def _thread():
+    """The process's one thread for the ADF's backward (steps run one at a time)."""
+    return concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="velogauss-adf")
