@@ -1,6 +1,9 @@
 """velogauss.model.beside: the ADF's backward in a thread of its own gives the single backward's
 gradients to the last bit."""
 
+import gc
+import weakref
+
 import numpy as np
 import pytest
 import torch
@@ -95,3 +98,22 @@ def test_an_error_in_the_thread_reaches_the_backward(monkeypatch):
     monkeypatch.setattr(beside_module.torch.autograd, "grad", fails)
     with pytest.raises(RuntimeError, match="boom in the ADF's thread"):
         sum((o * w).sum() for o, w in zip(out, weights)).backward()
+
+
+def test_a_steps_graph_is_freed_by_its_last_reference_not_by_the_cyclic_collector(monkeypatch):
+    """No reference cycle through the autograd Functions: a cycle kept every step's graph
+    alive until Python's cyclic collector ran (40 MB more after 400 training steps)."""
+    jobs = []
+    made = beside_module._Job.__init__
+    monkeypatch.setattr(beside_module._Job, "__init__",
+                        lambda self, *a: (jobs.append(weakref.ref(self)), made(self, *a))[1])
+    spec, motion, canonical, weights = _setup("full", torch.float32)
+    gc.disable()
+    try:
+        out = gaussians_at(motion.params(), spec, *canonical, 0.9, beside=True)
+        sum((o * w).sum() for o, w in zip(out, weights)).backward()
+        assert len(jobs) == 1 and jobs[0]() is not None  # the outputs' graph still holds it
+        del out
+        assert jobs[0]() is None
+    finally:
+        gc.enable()

@@ -439,14 +439,14 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     # order, so whether a worker ran changes no number of the training. With the worker, the
     # ADF's backward runs in a thread of its own too (velogauss.model.beside), from the
     # iteration the ADF starts: the same numbers again.
-    from velogauss.model.beside import Beside
+    from velogauss.model.beside import _Job
     from velogauss.train import side
 
     ran_in, adf_in = [], []
     traced = side.side_loss
     monkeypatch.setattr(side, "side_loss", lambda *a: (ran_in.append(threading.current_thread()), traced(*a))[1])
-    handed = Beside.start_backward
-    monkeypatch.setattr(Beside, "start_backward", lambda self, g: (adf_in.append(1), handed(self, g))[1])
+    handed = _Job.start_backward
+    monkeypatch.setattr(_Job, "start_backward", lambda self, g: (adf_in.append(1), handed(self, g))[1])
     # The default threads with a budget of two (OMP_NUM_THREADS): one torch thread, as every
     # test has, and two compositing threads, so the worker (torch's own count stays 1 here).
     monkeypatch.setenv("OMP_NUM_THREADS", "2")

@@ -20,8 +20,9 @@ it only after the integration's branch: it waits for the thread and passes the g
 The numbers are those of the single backward, to the last bit: the ADF's graph is the same
 operations on the same values; x0 and z each receive exactly two sums, the ADF's and the
 integration's, whose order does not change a sum of two; the code network's contributions
-still come after both (`tests/model/test_beside.py`; the training is bitwise the previous
-one, `python -m velogauss.bench.step_ratio`).
+still come after both (`tests/app/test_beside.py`; the training is bitwise the previous
+one, `python -m velogauss.bench.step_ratio`). That needs an integration that reads x0 once,
+as the affine velocity's does (`velogauss.model.motion.gaussians_at` uses it there only).
 """
 
 import concurrent.futures
@@ -40,7 +41,24 @@ def adf_residual_beside(params, x0, t, z, cfg):
 
 
 class Beside:
-    """The ADF's residual with its backward beside the integration's (`adf_residual_beside`)."""
+    """The ADF's residual with its backward beside the integration's (`adf_residual_beside`).
+
+    The autograd Functions hold the `_Job`, not this handle: the handle holds the token, whose
+    graph node holds the job, so no reference cycle keeps a step's graph alive after its
+    backward (one did, until Python's cyclic collector ran: 40 MB more after 400 steps).
+    """
+
+    def __init__(self, params, x0, t, z, cfg, thread):
+        self._job = _Job(params, x0, t, z, cfg, thread)
+        self._token = _Join.apply(self._job, *self._job.inputs)
+
+    def value(self):
+        """(dx (N, 3), dq (N, 4), ds (N, 3)), as `adf_residual` returns them, in the step's graph."""
+        return _Hand.apply(self._job, self._token)
+
+
+class _Job:
+    """The ADF's own graph on detached copies of x0 and z, and its backward in `thread`."""
 
     def __init__(self, params, x0, t, z, cfg, thread):
         self.thread, self.future = thread, None
@@ -51,11 +69,6 @@ class Beside:
         self.leaves = [x0_own, z_own] + weights
         with torch.enable_grad():
             self.out = adf_residual(params, x0_own, t, z_own, cfg)
-        self.token = _Join.apply(self, *self.inputs)
-
-    def value(self):
-        """(dx (N, 3), dq (N, 4), ds (N, 3)), as `adf_residual` returns them, in the step's graph."""
-        return _Hand.apply(self, self.token)
 
     def start_backward(self, grads):
         """Submit the ADF's backward for the gradients `grads` of (dx, dq, ds)."""
@@ -65,7 +78,7 @@ class Beside:
     def join_backward(self):
         """The gradients of (x0, z, weights...) once the thread has them (None where not wanted)."""
         found = iter(self.future.result())
-        self.future = None
+        self.future = self.out = self.leaves = self.inputs = None  # the graph's last use
         return [next(found) if want else None for want in self.wanted]
 
 
@@ -73,27 +86,27 @@ class _Join(torch.autograd.Function):
     """A token in the step's graph on the ADF's inputs; its backward waits for the thread."""
 
     @staticmethod
-    def forward(ctx, beside, *inputs):
-        ctx.beside = beside
+    def forward(ctx, job, *inputs):
+        ctx.job = job
         return inputs[0].new_zeros(())
 
     @staticmethod
     def backward(ctx, _):
-        return (None, *ctx.beside.join_backward())
+        return (None, *ctx.job.join_backward())
 
 
 class _Hand(torch.autograd.Function):
     """The ADF's output in the step's graph; its backward starts the thread's."""
 
     @staticmethod
-    def forward(ctx, beside, token):
-        ctx.beside = beside
+    def forward(ctx, job, token):
+        ctx.job = job
         ctx.token = (token.dtype, token.device)
-        return tuple(o.detach() for o in beside.out)
+        return tuple(o.detach() for o in job.out)
 
     @staticmethod
     def backward(ctx, *grads):
-        ctx.beside.start_backward(grads)
+        ctx.job.start_backward(grads)
         dtype, device = ctx.token
         return None, torch.zeros((), dtype=dtype, device=device)
 
