@@ -467,6 +467,26 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.parametrize("cores, worker, during", [(2, True, 1), (2, False, 2), (4, True, 3), (1, False, 1)])
+def test_the_renders_leave_the_side_worker_a_core(tiny_scene, tmp_path, monkeypatch, cores, worker, during):
+    # With the side losses' worker the step's compositing takes one thread fewer than the
+    # run's, at least one, and gives it back after the step.
+    from velogauss_fast.backends import numba_backend
+
+    monkeypatch.setenv("OMP_NUM_THREADS", str(cores))
+    monkeypatch.setattr(numba_backend, "_THREADS", numba_backend._THREADS)  # prepare sets it: restored after
+    trainer, _ = loop.prepare(load_config(None, TINY), tiny_scene, tmp_path)
+    assert trainer.side_worker == (cores >= 2) and numba_backend.get_num_threads() == cores
+    trainer.side_worker = worker  # (2, False): the side losses inline, as the test above runs them
+    seen = []
+    rendered = loop.render_gaussians
+    monkeypatch.setattr(loop, "render_gaussians",
+                        lambda *a: (seen.append(numba_backend.get_num_threads()), rendered(*a))[1])
+    trainer.step(trainer.cfg.train.warmup)
+    assert seen and set(seen) == {during}
+    assert numba_backend.get_num_threads() == cores
+
+
 @pytest.mark.parametrize("overrides, start", [
     ([], "window"),  # rigid patterns (toss): the patterns learn the motion before the ADF
     (["model.patterns=mlp"], "warmup"),  # the time network: the ADF starts with the motion

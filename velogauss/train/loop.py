@@ -47,6 +47,7 @@ from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train import side
 from velogauss.train.sampling import FrameSampler, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
+from velogauss_fast.backends import numba_backend
 from velogauss_fast.losses import photometric_loss
 from velogauss_fast.metrics import psnr, ssim_target
 from velogauss_core.constants import STATIC_MOTION_PX
@@ -243,7 +244,8 @@ class _Loop:
         self.optimizer.zero_grad(set_to_none=True)
         pending = side.start(model, self.cfg, params, spec, side.draw(self, it, spec), self.side_worker)
         try:
-            loss, renders = self.render_loss(frames, indices, params, spec, offset, motion_on)
+            with self.render_threads():
+                loss, renders = self.render_loss(frames, indices, params, spec, offset, motion_on)
             loss.backward()
         finally:
             side_value = side.finish(pending)  # waits for the worker even when the renders raised
@@ -261,6 +263,15 @@ class _Loop:
             image = renders[0][0]
             frame_psnr = float(psnr(image.detach().clamp(0, 1), self.images[indices[0]]))
         return float(loss.detach()) + side_value, frame_psnr
+
+    def render_threads(self):
+        """The compositing threads of the step's renders (a context): with the side losses'
+        worker, one fewer than the run's, at least one, so that the worker keeps a core while
+        the views render (2 cores: one compositing thread; the step 1.05x faster than with two,
+        and the training the same to the last bit: benchmarks/RESULTS.md, "Toward a 2x step")."""
+        if not self.side_worker:
+            return contextlib.nullcontext()
+        return numba_backend.num_threads(max(1, numba_backend.get_num_threads() - 1))
 
     def render_loss(self, frames, indices, params, spec, offset, motion_on):
         """(photometric loss over the views + the ADF's lambda_adf · mean |Δx|², [(image,

@@ -15,6 +15,7 @@ thread pool of Python threads (which wait on a lock, never spin). Their number i
 torch one thread for its many small operations and these kernels one per core.
 """
 
+import contextlib
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -42,6 +43,17 @@ def set_num_threads(n):
 def get_num_threads():
     """The compositing threads a render uses: set_num_threads's, else torch's."""
     return _THREADS or torch.get_num_threads()
+
+
+@contextlib.contextmanager
+def num_threads(n):
+    """`set_num_threads(n)` for the renders inside the block, the previous setting after it.
+    A render's backward uses the parts of its forward, so a render started inside keeps them."""
+    previous = set_num_threads(n)
+    try:
+        yield
+    finally:
+        set_num_threads(previous)
 
 
 def _run_parts(kernel, n_parts, *args):
