@@ -267,8 +267,9 @@ class _Loop:
     def render_threads(self):
         """The compositing threads of the step's renders (a context): with the side losses'
         worker, one fewer than the run's, at least one, so that the worker keeps a core while
-        the views render (2 cores: one compositing thread; the step 1.05x faster than with two,
-        and the training the same to the last bit: benchmarks/RESULTS.md, "Toward a 2x step")."""
+        the views render (2 cores: one compositing thread; the step 1.08x faster than with two,
+        the main job's checkpoints equal to the last bit: benchmarks/RESULTS.md, "Toward a 2x
+        step")."""
         if not self.side_worker:
             return contextlib.nullcontext()
         return numba_backend.num_threads(max(1, numba_backend.get_num_threads() - 1))
