@@ -106,12 +106,14 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
         return x, q, s, x
     if spec.scheme != "integrate":
         raise ValueError(f"spec.scheme: unknown scheme {spec.scheme!r}")
-    t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
-    # Created before the integration, so that the backward reaches its join after it. The
-    # affine velocity's integration only: it reads x0 once, so that x0, like z, receives one
-    # sum from each branch and the numbers stay those of one backward (velogauss.model.beside).
-    beside = beside and spec.adf and spec.velocity == "affine" and _backward_follows(x0, z)
-    adf = adf_residual_beside(params, x0, t_adf, z, cfg) if beside else None
+    adf = None
+    if spec.adf:
+        t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
+        # Created before the integration, so that the backward reaches its join after it. The
+        # affine velocity's integration only: it reads x0 once, so that x0, like z, receives one
+        # sum from each branch and the numbers stay those of one backward (velogauss.model.beside).
+        if beside and spec.velocity == "affine" and _backward_follows(x0, z):
+            adf = adf_residual_beside(params, x0, t_adf, z, cfg)
     xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
     if not spec.adf:
         return xs, qs, ss, xs
