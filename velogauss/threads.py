@@ -13,7 +13,7 @@ thread opens no region at all (benchmarks/RESULTS.md, "Where contention comes fr
 * the numba compositing kernels get one thread per core this process may use (its CPU
   affinity, capped by OMP_NUM_THREADS when that is set); they are Python threads that wait
   on a lock, and there are only two such parallel sections per step (a training step's renders
-  take one fewer while the side losses' thread runs: velogauss.train.loop);
+  take one fewer while the side losses' process runs: velogauss.train.loop);
 * OMP_WAIT_POLICY=PASSIVE (unless already set): should anything still run OpenMP with more
   threads (`--threads N`), idle workers sleep instead of spinning on a core another process
   needs. libgomp reads it once, when it loads: `prepare_environment` must run before torch

@@ -434,17 +434,19 @@ def _trains_and_reloads(cfg, scene, run_dir):
 
 
 def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, tmp_path, monkeypatch):
-    # The physics, carry and mixing losses run in a worker thread beside the renders
-    # (velogauss.train.side); their draws come first and their gradients join in a fixed
-    # order, so whether a worker ran changes no number of the training. With the worker, the
-    # ADF's backward runs in a thread of its own too (velogauss.model.beside), from the
+    # The physics, carry and mixing losses run in a worker process beside the renders
+    # (velogauss.train.side_process); their draws come first and their gradients join in a
+    # fixed order, so whether a worker ran changes no number of the training. With the worker,
+    # the ADF's backward runs in a thread of its own too (velogauss.model.beside), from the
     # iteration the ADF starts: the same numbers again.
     from velogauss.model.beside import _Job
-    from velogauss.train import side
+    from velogauss.train import side, side_process
 
-    ran_in, adf_in = [], []
-    traced = side.side_loss
-    monkeypatch.setattr(side, "side_loss", lambda *a: (ran_in.append(threading.current_thread()), traced(*a))[1])
+    submitted, inline, adf_in = [], [], []
+    send = side_process.SideProcess.submit
+    monkeypatch.setattr(side_process.SideProcess, "submit", lambda self, *a: (submitted.append(1), send(self, *a))[1])
+    traced = side.side_loss  # in this process: the inline runs only
+    monkeypatch.setattr(side, "side_loss", lambda *a: (inline.append(1), traced(*a))[1])
     handed = _Job.start_backward
     monkeypatch.setattr(_Job, "start_backward", lambda self, g: (adf_in.append(1), handed(self, g))[1])
     # The default threads with a budget of two (OMP_NUM_THREADS): one torch thread, as every
@@ -454,13 +456,13 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     trained = {}
     for worker in (True, False):
         trainer, _ = loop.prepare(cfg, tiny_scene, tmp_path / str(worker))
-        assert trainer.side_worker
-        trainer.side_worker = worker
+        assert isinstance(trainer.side_worker, side_process.SideProcess)
+        if not worker:
+            trainer.side_worker = None
         first = max(cfg.train.warmup, trainer.adf_start - 3)  # 3 iterations without the ADF, 3 with it
         losses = [trainer.step(it) for it in range(first, first + 6)]
         trained[worker] = ({k: v.detach().clone() for k, v in trainer.model.state_dict().items()}, losses)
-    threads = {t is threading.main_thread() for t in ran_in}
-    assert threads == {False, True}, "the side losses ran in the worker, then inline"
+    assert len(submitted) == len(inline) == 6, "the side losses ran in the worker process, then inline"
     assert len(adf_in) == 3, "the ADF's backward ran beside on the worker's iterations with the ADF"
     (a, loss_a), (b, loss_b) = trained[True], trained[False]
     assert loss_a == loss_b
@@ -476,8 +478,9 @@ def test_the_renders_leave_the_side_worker_a_core(tiny_scene, tmp_path, monkeypa
     monkeypatch.setenv("OMP_NUM_THREADS", str(cores))
     monkeypatch.setattr(numba_backend, "_THREADS", numba_backend._THREADS)  # prepare sets it: restored after
     trainer, _ = loop.prepare(load_config(None, TINY), tiny_scene, tmp_path)
-    assert trainer.side_worker == (cores >= 2) and numba_backend.get_num_threads() == cores
-    trainer.side_worker = worker  # (2, False): the side losses inline, as the test above runs them
+    assert (trainer.side_worker is not None) == (cores >= 2) and numba_backend.get_num_threads() == cores
+    if not worker:
+        trainer.side_worker = None  # (2, False): the side losses inline, as the test above runs them
     seen = []
     rendered = loop.render_gaussians
     monkeypatch.setattr(loop, "render_gaussians",
@@ -504,4 +507,4 @@ def test_the_adf_starts_as_the_patterns_call_for(tiny_scene, tmp_path, overrides
 
 def test_one_thread_computes_the_side_losses_inline(tiny_scene, tmp_path):
     trainer, _ = loop.prepare(load_config(None, [*TINY, "train.threads=1"]), tiny_scene, tmp_path)
-    assert not trainer.side_worker
+    assert trainer.side_worker is None

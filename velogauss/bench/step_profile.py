@@ -92,8 +92,8 @@ def measure(iterations, quick=False):
 
         seconds_per_iteration(2)
         unprofiled = seconds_per_iteration(iterations)
-        # cProfile sees only the thread that enabled it: the side losses run inline from here on.
-        loop.side_worker = False
+        # cProfile sees only the thread that enabled it, in this process: the side losses run inline from here on.
+        loop.side_worker = None
         inline = seconds_per_iteration(iterations)
         profiler = cProfile.Profile()
         profiler.enable()

@@ -5,9 +5,9 @@ COMPOSE): the ADF's branch Δx = F(γ(x0), γ(t), z) (its MLP: matrix products, 
 and the integration's branch x*(t) (VG-TRAJ: hundreds of small operations) both end at the
 canonical means x0 and the code z, and neither needs the other. torch's autograd engine runs
 a backward on the thread that called it, so the two branches run one after the other on one
-core while the other is idle or finishing the side losses (velogauss.train.side):
-`adf_residual_beside` hands the ADF's branch to a thread of its own (the side losses' one is
-often still busy then), and the integration's runs meanwhile.
+core while the other is idle or finishing the side losses (velogauss.train.side_process):
+`adf_residual_beside` hands the ADF's branch to a thread of its own, and the integration's
+runs meanwhile.
 
 How: the ADF is evaluated on detached copies of x0 and z (its own small graph), and two
 autograd Functions stand in for it in the step's graph. `_Hand` sits between its output and

@@ -72,15 +72,9 @@ class VeloGaussModel(nn.Module):
         _check_time(t)
         spec = self.spec if spec is None else spec
         g = self.gaussians
-        x0, q0, s0 = g.means, normalize_quat(g.quats), g.scales
-        if not spec.moving or not bool(self.moving.any()):
-            return x0, q0, s0, x0
-        params = self.motion.params() if params is None else params
-        idx = torch.nonzero(self.moving).squeeze(1)
-        x, q, s, xs = motion_fns.gaussians_at(params, spec, x0.index_select(0, idx), q0.index_select(0, idx),
-                                              s0.index_select(0, idx), t, offset, beside)
-        return (x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s),
-                x0.index_copy(0, idx, xs))
+        if spec.moving and params is None:
+            params = self.motion.params()
+        return moving_state_at(params, spec, g.means, g.quats, g.scales, self.moving, t, offset, beside)
 
     def gaussians_at(self, t):
         """The Gaussians at time t as a dict: means, quats, scales, opacities (N,), colors
@@ -151,6 +145,25 @@ class VeloGaussModel(nn.Module):
     def set_moving(self, moving):
         """Flag which particles are integrated (bool (N,))."""
         self.moving = moving.to(device=self.moving.device, dtype=torch.bool)
+
+
+def moving_state_at(params: dict | None, spec: MotionSpec, x0, quats, s0, moving, t, offset: float = 0.0,
+                    beside: bool = False):
+    """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t of the
+    Gaussians whose canonical state is x0 (N, 3), quats (N, 4) (any norm), s0 (N, 3) > 0,
+    the motion moving those flagged in `moving` (N,) bool and the others left canonical.
+
+    `VeloGaussModel.state_at` without the model (the side losses' process has its tensors,
+    not the model: velogauss.train.side), t checked by the caller; params: the motion
+    parameter dict, unread when nothing moves; offset, beside: as `state_at`'s.
+    """
+    q0 = normalize_quat(quats)
+    if not spec.moving or not bool(moving.any()):
+        return x0, q0, s0, x0
+    idx = torch.nonzero(moving).squeeze(1)
+    x, q, s, xs = motion_fns.gaussians_at(params, spec, x0.index_select(0, idx), q0.index_select(0, idx),
+                                          s0.index_select(0, idx), t, offset, beside)
+    return x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s), x0.index_copy(0, idx, xs)
 
 
 def _check_time(t):

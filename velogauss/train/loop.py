@@ -8,8 +8,8 @@ Per iteration (velogauss.config holds every number):
 3. loss = photometric (VG-LOSS, the mean over the views) + ramped physics loss (VG-LOSS-PHYS) on collocation
    points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual)
    + the mixing weights' entropy (VG-LOSS-MIX: each particle commits to one motion pattern);
-   the losses no render goes through (physics, VG-LOSS-CARRY, mixing) run in a worker thread
-   beside the renders (velogauss.train.side);
+   the losses no render goes through (physics, VG-LOSS-CARRY, mixing) run in a worker process
+   beside the renders (velogauss.train.side, velogauss.train.side_process);
 4. Adam step with the scheduled learning rates; density statistics; every
    `densify.every` iterations clone/split/prune, opacity resets (each followed by at least a
    reset period of training), static-particle detection.
@@ -44,7 +44,7 @@ from velogauss.train.centres import anchor_centres, first_knot_mask, resolve_rig
 from velogauss.train.frequency import start_frequency
 from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
-from velogauss.train import side
+from velogauss.train import side, side_process
 from velogauss.train.sampling import FrameSampler, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.backends import numba_backend
@@ -144,9 +144,11 @@ def prepare(cfg, data, run_dir, resume=False):
     if resume:
         optimizer.load_state_dict(payload["optimizer"])
         stats.load_state_dict(payload["density"])
-    # The side losses go to a worker thread where the thread budget allows two parallel parts
-    # (the compositing's); measured on the CPU only, so elsewhere they run inline.
-    side_worker = parallel >= 2 and device.type == "cpu"
+    # The side losses go to a worker process where the thread budget allows two parallel parts
+    # (the compositing's); measured on the CPU only, so elsewhere they run inline. Started now
+    # (once per process), so that it has imported torch by the end of the warm-up, which has
+    # no side losses.
+    side_worker = side_process.process() if parallel >= 2 and device.type == "cpu" else None
     return _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device, side_worker), start
 
 
@@ -156,7 +158,7 @@ class _Loop:
     def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device,
                  side_worker):
         self.cfg, self.data, self.run_dir = cfg, data, run_dir
-        self.side_worker = side_worker  # velogauss.train.side: the side losses beside the renders
+        self.side_worker = side_worker  # velogauss.train.side_process: the side losses beside the renders, or None
         self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile
         self.rng, self.extent, self.extra, self.device = rng, extent, extra, device
         # What the motion computes and which losses are on, resolved once when the model was built.
@@ -270,7 +272,7 @@ class _Loop:
         the views render (2 cores: one compositing thread; the step 1.08x faster than with two,
         the main job's checkpoints equal to the last bit: benchmarks/RESULTS.md, "Toward a 2x
         step")."""
-        if not self.side_worker:
+        if self.side_worker is None:
             return contextlib.nullcontext()
         return numba_backend.num_threads(max(1, numba_backend.get_num_threads() - 1))
 
@@ -280,7 +282,8 @@ class _Loop:
         model = self.model
         # The ADF's backward beside the integration's where the side losses have a thread too
         # (the same thread budget, velogauss.model.beside).
-        means, quats, scales, base = model.state_at(frames[0].time, params, spec, offset, self.side_worker)
+        means, quats, scales, base = model.state_at(frames[0].time, params, spec, offset,
+                                                   self.side_worker is not None)
         gaussians = model.with_appearance(means, quats, scales)
         renders, loss = [], 0.0
         for frame, index in zip(frames, indices):

@@ -7,16 +7,19 @@ reach the motion parameters only. A step therefore
 1. draws their random numbers first, in the main thread and always in the same order
    (`draw`), so a run's draws never depend on timing and a resumed run repeats them;
 2. computes them and their gradients (`side_loss`, torch.autograd.grad onto the motion
-   parameters) in a worker thread while the main thread renders (`start`);
+   parameters) in a worker process while the main thread renders (`start`;
+   velogauss.train.side_process);
 3. adds those gradients to the renders' after its own backward (`finish`), always
-   in that order: the numbers depend neither on which thread finishes first nor on whether
+   in that order: the numbers depend neither on which finishes first nor on whether
    a worker ran at all (one thread, `--threads 1` or OMP_NUM_THREADS=1: the same function
    runs inline).
 
-Why a thread helps on a 2-core CPU: torch releases the GIL inside each kernel, and the side
-losses are a quarter of a step's work (the profile in benchmarks/RESULTS.md). A worker thread
-waits on a lock, not in an OpenMP barrier, so beside another process it takes no core that
-it does not use (velogauss/threads.py).
+The side losses read the motion parameters and the detached canonical Gaussians
+(`Canonical`), not the model: that is all the worker process is sent.
+
+Why a worker helps on a 2-core CPU: the side losses are a quarter of a step's work (the
+profile in benchmarks/RESULTS.md). The worker waits on a socket, not in an OpenMP barrier, so
+beside another process it takes no core that it does not use (velogauss/threads.py).
 
 Collocation points near the Gaussians (placement "gaussians") are drawn as indices into the
 moving Gaussians plus offsets. Every moving Gaussian is moved to the collocation time, not
@@ -26,13 +29,12 @@ roundings, grown over a training, changed the default scene's results by several
 the losses computed after the renders would give, to the last bit.
 """
 
-import concurrent.futures
-import functools
 from typing import NamedTuple
 
 import numpy as np
 import torch
 
+from velogauss.model.dynamic import moving_state_at
 from velogauss.model.motion import carry_loss, motion_residuals
 from velogauss.train.sampling import collocation_points, draw_near
 from velogauss_fast.losses import mixing_entropy_loss, physics_loss
@@ -58,6 +60,28 @@ class CarryDraw(NamedTuple):
     t_a: float
     t: float
     index: torch.Tensor
+
+
+class Canonical(NamedTuple):
+    """What the side losses read of the model: its canonical Gaussians, detached, means (N, 3),
+    quats (N, 4) (raw, any norm), scales (N, 3) > 0, and which of them move, moving (N,) bool."""
+
+    means: torch.Tensor
+    quats: torch.Tensor
+    scales: torch.Tensor
+    moving: torch.Tensor
+
+
+def canonical(model):
+    """The `Canonical` of a VeloGaussModel `model`."""
+    g = model.gaussians
+    return Canonical(g.means.detach(), g.quats.detach(), g.scales.detach(), model.moving)
+
+
+def motion_leaves(motion):
+    """The motion parameters (velogauss.model.motion.MotionParameters) the side losses
+    differentiate: those that train this step, in the module's order."""
+    return [p for p in motion.parameters() if p.requires_grad]
 
 
 class Draws(NamedTuple):
@@ -110,48 +134,48 @@ def draw_moving(model, count, rng):
     return idx
 
 
-def side_loss(model, cfg, params, spec, draws):
+def side_loss(canon, leaves, cfg, params, spec, draws):
     """(loss (0-d, detached), [(motion parameter, its gradient or None)]) of the drawn side
     losses: ramp · VG-LOSS-PHYS + lambda_carry · VG-LOSS-CARRY + VG-LOSS-MIX (the mixing
-    weight is inside `mixing_entropy_loss`). `params`: the step's motion parameter dict."""
+    weight is inside `mixing_entropy_loss`). canon: the model's `Canonical`; leaves: the
+    motion parameters to differentiate (`motion_leaves`); `params`: the step's motion
+    parameter dict, built from them."""
     loss = 0.0
-    g = model.gaussians
     if draws.physics is not None:
         d, p = draws.physics, cfg.physics
-        x = d.x if d.index is None else collocation_near(model, d, params, spec)
+        x = d.x if d.index is None else collocation_near(canon, d, params, spec)
         r, div = motion_residuals(params, spec, x, d.t)
         loss = loss + physics_loss(r, div, d.ramp * p.lambda_transport, d.ramp * p.lambda_div)
     if draws.carry is not None:
         d = draws.carry
-        x0, q0, s0 = (v.detach().index_select(0, d.index) for v in (g.means, g.quats, g.scales))
+        x0, q0, s0 = (v.index_select(0, d.index) for v in (canon.means, canon.quats, canon.scales))
         loss = loss + cfg.train.lambda_carry * carry_loss(params, spec, x0, q0, s0, d.t_a, d.t)
     if draws.mixing is not None:
         # Detached means: the entropy shapes the code and mixing networks, it does not move the Gaussians.
-        z = physics_code(params, g.means.detach().index_select(0, draws.mixing), model.motion.spec.config)
+        z = physics_code(params, canon.means.index_select(0, draws.mixing), spec.config)
         loss = loss + mixing_entropy_loss(mixing_logits(params, z), cfg.train.lambda_mix)
-    leaves = [p for p in model.motion.parameters() if p.requires_grad]
     return loss.detach(), list(zip(leaves, torch.autograd.grad(loss, leaves, allow_unused=True)))
 
 
 @torch.no_grad()
-def collocation_near(model, draw, params, spec):
+def collocation_near(canon, draw, params, spec):
     """x (n, 3): the collocation points of `draw` (a PhysicsDraw near the Gaussians), the
     drawn Gaussians' means at draw.t plus the offsets (every moving Gaussian is moved: see
-    the module docstring)."""
-    return model.state_at(draw.t, params, spec)[0].index_select(0, draw.index) + draw.offsets
+    the module docstring); canon: the model's `Canonical`."""
+    means = moving_state_at(params, spec, canon.means, canon.quats, canon.scales, canon.moving, draw.t)[0]
+    return means.index_select(0, draw.index) + draw.offsets
 
 
 def start(model, cfg, params, spec, draws, worker):
-    """Start the side losses of `draws` (`side_loss`): a Future, or None when nothing was
-    drawn. In the worker thread when `worker` (the run's thread budget allows two parallel
-    parts: velogauss.train.loop.prepare), else inline."""
+    """Start the side losses of `draws` (`side_loss`): a pending result for `finish`, or None
+    when nothing was drawn. In `worker` (a velogauss.train.side_process.SideProcess, when
+    the run's thread budget allows two parallel parts: velogauss.train.loop.prepare), else
+    inline when it is None."""
     if not draws.any:
         return None
-    if worker:
-        return _worker().submit(side_loss, model, cfg, params, spec, draws)
-    done = concurrent.futures.Future()
-    done.set_result(side_loss(model, cfg, params, spec, draws))
-    return done
+    if worker is not None:
+        return worker.submit(model.motion, canonical(model), cfg, spec, draws)
+    return _Done(side_loss(canonical(model), motion_leaves(model.motion), cfg, params, spec, draws))
 
 
 def finish(pending):
@@ -167,7 +191,10 @@ def finish(pending):
     return float(loss)
 
 
-@functools.cache
-def _worker():
-    """The process's one side-loss thread (steps run one at a time)."""
-    return concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="velogauss-side")
+class _Done(NamedTuple):
+    """The side losses computed inline: `start`'s pending result, already there."""
+
+    value: tuple
+
+    def result(self):
+        return self.value
