@@ -43,6 +43,7 @@ def photometric_kernel(x, y, x_mean, y_mean, mu_y, sq_y, g, lam, want_grad, grad
     stat = np.empty((3, h, w))
     ssim_sum = 0.0
     l1_sum = 0.0
+    smap = np.empty((h, w))
     for c in range(n_ch):
         xm, ym = x_mean[c], y_mean[c]
         for i in range(H):
@@ -51,6 +52,10 @@ def photometric_kernel(x, y, x_mean, y_mean, mu_y, sq_y, g, lam, want_grad, grad
                 maps[0, i, j] = xc
                 maps[1, i, j] = xc * xc
                 maps[2, i, j] = xc * (y[c, i, j] - ym)
+        # The sums run in loops of their own, in the same order: an ordered sum cannot be
+        # vectorised, and in the loops above it kept the compiler from vectorising the rest.
+        for i in range(H):
+            for j in range(W):
                 l1_sum += abs(x[c, i, j] - y[c, i, j])
         # The window's column pass, then its row pass.
         col[:] = 0.0
@@ -77,13 +82,16 @@ def photometric_kernel(x, y, x_mean, y_mean, mu_y, sq_y, g, lam, want_grad, grad
                 a1, a2 = 2.0 * mxs * mys + _C1, 2.0 * cov + _C2
                 b1, b2 = mxs * mxs + mys * mys + _C1, var_x + var_y + _C2
                 s = (a1 * a2) / (b1 * b2)
-                ssim_sum += s
+                smap[i, j] = s
                 g_a1, g_a2 = gs * a2 / (b1 * b2), gs * a1 / (b1 * b2)
                 g_b1, g_b2 = -gs * s / b1, -gs * s / b2
                 g_cov, g_var = 2.0 * g_a2, g_b2
                 stat[0, i, j] = 2.0 * mys * g_a1 + 2.0 * mxs * g_b1 - 2.0 * mx * g_var - my * g_cov
                 stat[1, i, j] = g_var
                 stat[2, i, j] = g_cov
+        for i in range(h):
+            for j in range(w):
+                ssim_sum += smap[i, j]
         if not want_grad:
             continue
         # Adjoint of the row pass, then of the column pass (into maps), then onto x through
