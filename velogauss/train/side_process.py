@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from velogauss.model.motion import MotionParameters
 from velogauss.train import side
 
 # Rows per Gaussian in the shared buffer of the canonical Gaussians: means 3, quats 4, scales 3.
@@ -139,12 +140,8 @@ class SideProcess:
     def gradients(self, params, flags, present):
         """[(parameter, its gradient or None)] of the parameters with a set flag, read from
         the shared gradients (copied: the next step writes there again)."""
-        out, offset = [], 0
-        for p, flag, has in zip(params, flags, present):
-            if flag:
-                out.append((p, self._grads[offset:offset + p.numel()].view_as(p).clone() if has else None))
-            offset += p.numel()
-        return out
+        grads = _per_parameter(self._grads, params)
+        return [(p, g.clone() if has else None) for p, g, flag, has in zip(params, grads, flags, present) if flag]
 
     def receive(self):
         """The answer to the last `submit`: (loss, which parameters got a gradient); raises
@@ -220,8 +217,6 @@ def serve(conn):
 
 def _step(held, extras, n, flags, spec, draws):
     """One step's side losses in the process: (loss (float), which parameters got a gradient)."""
-    from velogauss.model.motion import MotionParameters
-
     if "setup" in extras:
         motion_spec, cfg, threads, files = extras["setup"]
         torch.set_num_threads(threads)
@@ -234,25 +229,29 @@ def _step(held, extras, n, flags, spec, draws):
     if spec is not None:
         held["spec"] = spec
     motion, (buffer, moving) = held["motion"], held["canon"]
-    offset = 0
+    params = list(motion.parameters())
     with torch.no_grad():
-        for p, flag in zip(motion.parameters(), flags):
-            p.copy_(held["params"][offset:offset + p.numel()].view_as(p))
+        for p, value, flag in zip(params, _per_parameter(held["params"], params), flags):
+            p.copy_(value)
             p.requires_grad_(flag)
-            offset += p.numel()
-    ends = np.cumsum((0,) + _ROWS) * n
-    means, quats, scales = (buffer[a:b].view(n, -1).clone() for a, b in zip(ends[:-1], ends[1:]))
+    means, quats, scales = (v.view(n, -1).clone() for v in buffer[:sum(_ROWS) * n].split([r * n for r in _ROWS]))
     canon = side.Canonical(means, quats, scales, moving[:n].clone())
     loss, grads = side.side_loss(canon, side.motion_leaves(motion), held["cfg"], motion.params(), held["spec"],
                                  _tensors(draws))
-    present, offset, found = [], 0, dict(grads)
-    for p, flag in zip(motion.parameters(), flags):
-        grad = found.get(p) if flag else None
+    found = dict(grads)
+    present = []
+    for p, out in zip(params, _per_parameter(held["grads"], params)):
+        grad = found.get(p)
         if grad is not None:
-            held["grads"][offset:offset + p.numel()].copy_(grad.reshape(-1))
+            out.copy_(grad)
         present.append(grad is not None)
-        offset += p.numel()
     return float(loss), tuple(present)
+
+
+def _per_parameter(flat, params):
+    """Views of the flat buffer `flat` shaped as each of `params`, in order."""
+    return [v.view_as(p) for v, p in zip(flat[:sum(p.numel() for p in params)].split([p.numel() for p in params]),
+                                          params)]
 
 
 def _mapped(path, numel, dtype):
