@@ -203,3 +203,31 @@ def test_a_cuda_run_adds_its_own_section_and_keeps_the_cpu_one(tmp_path):
     write_section(out, "## Rasterizer", "## Rasterizer\n\nnew cpu numbers")
     text = out.read_text()
     assert "new cpu numbers" in text and "cuda numbers" in text and "\ncpu numbers" not in text
+
+
+def test_step_ratio_at_a_given_size_has_its_own_section(tmp_path):
+    import subprocess
+
+    from velogauss.bench import step_ratio
+
+    if subprocess.run(["git", "cat-file", "-e", f"{step_ratio.BEFORE}^{{commit}}"], capture_output=True).returncode:
+        pytest.skip(f"the 'before' revision {step_ratio.BEFORE} is not in this clone")
+    out = tmp_path / "RESULTS.md"
+    write_section(out, step_ratio.SECTION, f"{step_ratio.SECTION}\n\nthe default size's numbers")
+    result = step_ratio.run(str(out), quick=True, gaussians=321)
+    # Both versions trained the point cloud's 321 Gaussians (the quick scene's own has 200).
+    assert result["gaussians"] == 321
+    text = out.read_text()
+    assert "the default size's numbers" in text
+    body = section(text, "Training step: before / after, 321 Gaussians")
+    assert "with a point cloud of 321 points (321 Gaussians;" in body
+    assert "Regenerate: `python -m velogauss.bench.step_ratio --gaussians 321 --quick`" in body
+    assert len(table(body)[1]) == step_ratio.QUICK_ROUNDS
+
+
+def test_step_ratio_refuses_a_size_below_one(capsys):
+    from velogauss.bench import step_ratio
+
+    with pytest.raises(SystemExit):
+        step_ratio.main(["--gaussians", "0"])
+    assert "--gaussians: expected a positive integer, got '0'" in capsys.readouterr().err

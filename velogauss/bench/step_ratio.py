@@ -12,7 +12,10 @@ temporary folder), "after" this checkout. Each runs in a worker process of its o
 own imports and its own default threads, on the same scene; the workers take turns, so only
 one runs at a time. The iterations are those of the step profile (`velogauss.bench.step_profile`):
 the default config on the default scene from iteration warmup + curriculum on; `maintain` is
-not run, so no densification changes the work between rounds.
+not run, so no densification changes the work between rounds. `--gaussians N` starts both
+from a point cloud of N points instead of the scene's 2,000, the size the default training
+reaches after densification (6,692 Gaussians from iteration 2,000 on), where a change can gain
+less than at the start; its section is "## Training step: before / after, N Gaussians".
 
 Equal results: both workers run the same iterations from the same start (seed, scene), so
 after the last round their trainable tensors differ by the two versions' rounding only, grown
@@ -98,15 +101,16 @@ class _Worker:
         self.process.wait()
 
 
-def measure(revision=BEFORE, rounds=ROUNDS, iterations=ITERATIONS, quick=False):
+def measure(revision=BEFORE, rounds=ROUNDS, iterations=ITERATIONS, quick=False, gaussians=None):
     """{"rounds": [(before, after) mean s per iteration], "ratios", "ratio" (median before/after),
     "agreement" {parameter: (largest |before - after|, largest |after|)}, "losses" (before,
-    after) of the last iteration, "gaussians"}."""
+    after) of the last iteration, "gaussians"}. gaussians: the scene's point cloud size, None
+    for the default scene's."""
     from velogauss.bench.load import make_default_scene
 
     with tempfile.TemporaryDirectory(prefix="velogauss-ratio-") as tmp:
         tmp = Path(tmp)
-        scene = make_default_scene(tmp / "scene", quick)
+        scene = make_default_scene(tmp / "scene", quick, n_points=gaussians)
         workers = {"before": _Worker(export_revision(revision, tmp / "before"), scene), "after": _Worker(_ROOT, scene)}
         try:
             times, last = [], {}
@@ -130,8 +134,10 @@ def measure(revision=BEFORE, rounds=ROUNDS, iterations=ITERATIONS, quick=False):
             "losses": (last["before"]["loss"], last["after"]["loss"]), "gaussians": last["after"]["gaussians"]}
 
 
-def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=None, iterations=None, quick=False):
-    """Measure (`measure`) and write the "## Training step: before / after" section."""
+def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=None, iterations=None, quick=False,
+        gaussians=None):
+    """Measure (`measure`) and write the "## Training step: before / after" section (with
+    `gaussians`, a point cloud of that size: its own section)."""
     if device != "cpu":
         raise ValueError(f"--device: the step ratio runs on the CPU; expected cpu, got {device!r}")
     from velogauss.bench.harness import regenerate_command, write_table_section
@@ -139,16 +145,18 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=
     default_rounds, default_iterations = (QUICK_ROUNDS, QUICK_ITERATIONS) if quick else (ROUNDS, ITERATIONS)
     rounds, iterations = rounds or default_rounds, iterations or default_iterations
     torch.set_num_threads(1)  # the workers' default, which the section's machine line reports
-    result = measure(revision, rounds, iterations, quick)
+    result = measure(revision, rounds, iterations, quick, gaussians)
     options = ([f"--before {revision}"] if revision != BEFORE else []) + \
               ([f"--rounds {rounds}"] if rounds != default_rounds else []) + \
-              ([f"--iterations {iterations}"] if iterations != default_iterations else [])
+              ([f"--iterations {iterations}"] if iterations != default_iterations else []) + \
+              ([f"--gaussians {gaussians}"] if gaussians else [])
     lines = ["| round | before (ms per iteration) | after (ms per iteration) | before / after |", "|---:|---:|---:|---:|"]
     for k, ((b, a), ratio) in enumerate(zip(result["rounds"], result["ratios"]), 1):
         lines.append(f"| {k} | {1e3 * b:.1f} | {1e3 * a:.1f} | {ratio:.2f} |")
-    write_table_section(out_path, SECTION, [
-        f"A training iteration (`_Loop.step`) of the default training on the default scene ({result['gaussians']} "
-        f"Gaussians; motion, ADF and full physics loss on; velogauss's default threads) with the source tree at "
+    section = f"{SECTION}, {gaussians:,} Gaussians" if gaussians else SECTION
+    write_table_section(out_path, section, [
+        f"A training iteration (`_Loop.step`) of the default training on the default scene"
+        f"{f' with a point cloud of {gaussians:,} points' if gaussians else ''} ({result['gaussians']} Gaussians; motion, ADF and full physics loss on; velogauss's default threads) with the source tree at "
         f"`{revision}` (before) and this one (after), each in a process of its own, in {rounds} alternating rounds "
         f"of {iterations} iterations. Median before / after: **{result['ratio']:.2f}x**.",
         _agreement_sentence(result, rounds * (iterations + _WARMUP)),
@@ -177,9 +185,23 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=None, help=f"per side and round, default {ITERATIONS}")
     parser.add_argument("--quick", action="store_true",
                         help=f"smoke test: a 16 px scene, {QUICK_ROUNDS} rounds of {QUICK_ITERATIONS} iterations")
+    parser.add_argument("--gaussians", type=_positive, default=None,
+                        help="initial Gaussians (the scene's point cloud; default: the scene's 2,000)")
     parser.add_argument("--out", default="benchmarks/RESULTS.md")
     args = parser.parse_args(argv)
-    run(args.out, revision=args.before, rounds=args.rounds, iterations=args.iterations, quick=args.quick)
+    run(args.out, revision=args.before, rounds=args.rounds, iterations=args.iterations, quick=args.quick,
+        gaussians=args.gaussians)
+
+
+def _positive(text):
+    """argparse type: a positive int, else an error naming the value."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
 
 
 if __name__ == "__main__":
