@@ -28,9 +28,10 @@ export TORCH_CUDA_ARCH_LIST=${TORCH_CUDA_ARCH_LIST:-$(python3 -c 'import torch; 
   python3 -c 'import sys, torch; print("python", sys.version.split()[0], "torch", torch.__version__, "cuda", torch.version.cuda, torch.cuda.get_device_name(0))'
   nproc; } >"$out/env.txt" 2>&1
 
-# gsplat stays off the
-# path of everything else until it has compiled, so that nothing blocks on its build lock and
-# the training falls back to the torch backend when the compilation fails or runs late.
+# gsplat stays off the path of everything else until it has compiled, so that nothing blocks
+# on its build lock and the training falls back to the torch backend when the compilation
+# fails or runs late. The compilation and the tests stop in time to leave the training its
+# last 330 s (the default training took 299 s on an H200).
 gsplat_ok=0
 if [ -n "${GSPLAT_PATH:-}" ]; then
   ( export PYTHONPATH="$GSPLAT_PATH:$PYTHONPATH" MAX_JOBS=10

@@ -280,7 +280,7 @@ class _Loop:
         """(photometric loss over the views + the ADF's lambda_adf · mean |Δx|², [(image,
         meta, camera)] of each view): one state for all the views, which show one time."""
         model = self.model
-        # The ADF's backward beside the integration's where the side losses have a thread too
+        # The ADF's backward beside the integration's where the side losses have a worker too
         # (the same thread budget, velogauss.model.beside).
         means, quats, scales, base = model.state_at(frames[0].time, params, spec, offset,
                                                    self.side_worker is not None)

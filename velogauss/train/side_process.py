@@ -158,14 +158,13 @@ class SideProcess:
             raise exc from RemoteTraceback(text)
         return reply[1:]
 
-
     def _shared(self, numel, dtype):
         """A tensor (numel,) of `dtype` in a file both processes map; its path joins `_mapped`."""
         folder = "/dev/shm" if os.access("/dev/shm", os.W_OK) else None
         handle, path = tempfile.mkstemp(prefix="velogauss-side-", dir=folder)
         os.close(handle)
         self._mapped.append((path, numel, dtype))
-        return torch.from_file(path, shared=True, size=numel, dtype=dtype)
+        return _mapped(path, numel, dtype)
 
     def _unlink(self):
         for path, _, _ in self._mapped:
@@ -255,6 +254,7 @@ def _per_parameter(flat, params):
 
 
 def _mapped(path, numel, dtype):
+    """The tensor (numel,) of `dtype` in the shared file `path`, mapped."""
     return torch.from_file(path, shared=True, size=numel, dtype=dtype)
 
 
