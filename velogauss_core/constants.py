@@ -16,6 +16,11 @@ QUAT_ZERO_NORM_SQ = 1e-24
 # Gaussians whose camera-space depth is below this are culled. 3DGS and gsplat use 0.01:
 # the perspective Jacobian grows like 1/z^2, so closer Gaussians explode in screen size.
 NEAR_PLANE = 0.01
+# A viewing direction (VG-SH) shorter than this (world units) is taken as +z: below it the
+# direction is rounding noise of the camera centre -W^T t (an FMA or a different summation
+# order moves it by ~1e-16 |t| in float64, ~1e-7 |t| in float32), and such a Gaussian is
+# culled anyway (its depth is below NEAR_PLANE), so its colour is a convention, not a value.
+VIEW_DIRECTION_MIN = 1e-6
 # Gaussians beyond this depth are culled (gsplat's default far plane); it only guards
 # against inf/overflow for absurd depths.
 FAR_PLANE = 1e10

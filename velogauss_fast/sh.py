@@ -7,6 +7,7 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_core.checks import check_degree
+from velogauss_core.constants import VIEW_DIRECTION_MIN
 
 # Real SH normalisation constants of 3DGS's sh_utils.py (degree 0..3).
 C0 = 0.28209479177387814
@@ -22,7 +23,7 @@ def sh_to_color(sh, dirs, degree):
     """RGB of each Gaussian seen along `dirs`: max(0, sum_lm c_lm Y_lm(d) + 0.5) (VG-SH).
 
     sh: (N, K, 3) coefficients with K >= (degree + 1)^2 (later bands ignored); dirs: (N, 3)
-    viewing directions, any length (normalised here; a zero direction is taken as +z);
+    viewing directions, any length (normalised here; one shorter than VIEW_DIRECTION_MIN is taken as +z);
     degree in {0, 1, 2, 3} -> rgb (N, 3). The clamp at 0 passes no gradient below it.
     """
     check_degree("degree", degree)
@@ -32,7 +33,7 @@ def sh_to_color(sh, dirs, degree):
     check_array("dirs", dirs, (sh.shape[0], 3))
 
     n2 = (dirs * dirs).sum(-1, keepdim=True)
-    zero = n2 == 0
+    zero = n2 < VIEW_DIRECTION_MIN**2
     plus_z = torch.tensor([0.0, 0.0, 1.0], dtype=dirs.dtype, device=dirs.device)
     d = torch.where(zero, plus_z, dirs) / torch.sqrt(torch.where(zero, torch.ones_like(n2), n2))
     x, y, z = d[:, 0:1], d[:, 1:2], d[:, 2:3]

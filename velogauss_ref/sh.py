@@ -6,6 +6,7 @@ spec/rendering.md, VG-SH.
 import autograd.numpy as np
 
 from velogauss_core.checks import check_degree
+from velogauss_core.constants import VIEW_DIRECTION_MIN
 from velogauss_ref.checks import check_array
 
 # Real SH normalisation constants of 3DGS's utils/sh_utils.py, bands 0..3.
@@ -34,7 +35,7 @@ def sh_to_color(sh, dirs, degree):
 
     sh: (N, K, 3) coefficients c_lm in 3DGS order with K >= (degree + 1)^2 (later
     coefficients are ignored); dirs: (N, 3) viewing directions of any length (normalised
-    here; a zero direction is taken as +z); degree in {0, 1, 2, 3} -> rgb: (N, 3).
+    here; one shorter than VIEW_DIRECTION_MIN is taken as +z); degree in {0, 1, 2, 3} -> rgb: (N, 3).
     The clamp at 0 passes no gradient below it. Bad degree, too few coefficients,
     non-finite or wrongly shaped input raise ValueError.
     """
@@ -94,9 +95,9 @@ def viewing_directions(means, viewmat):
     return means - camera_centre(viewmat)
 
 
-
 def _unit(dirs):
-    """dirs / |dirs|, with a zero direction replaced by +z before dividing (no 0/0, no NaN gradient)."""
+    """dirs / |dirs| (N, 3) -> (N, 3), with a direction shorter than VIEW_DIRECTION_MIN replaced
+    by +z before dividing (no 0/0, no NaN gradient, no colour decided by rounding noise)."""
     n2 = np.sum(dirs * dirs, axis=-1, keepdims=True)
-    zero = n2 == 0
+    zero = n2 < VIEW_DIRECTION_MIN**2
     return np.where(zero, np.array([0.0, 0.0, 1.0]), dirs) / np.sqrt(np.where(zero, 1.0, n2))

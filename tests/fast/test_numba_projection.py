@@ -3,6 +3,8 @@ view (VG-COV, VG-PROJ, VG-SH and the composited opacities), against the referenc
 torch path. Whole renders through it run in tests/fast/test_raster.py and
 test_render_hard_cases.py (the `backend` parametrization's "numba")."""
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 import torch
@@ -127,22 +129,41 @@ def test_prepare_numba_gradcheck(inputs):
     gradcheck_fn(fast_outputs(prepare_numba), inputs, diff=(0, 1, 2, 3, 4), device="cpu")
 
 
+def camera_centre(viewmat, rounding):
+    """-W^T t (3,), each entry a three-term dot product rounded as a CPU may round it:
+    "sequential" (three products, two additions, each rounded: no FMA) or "fma" (a chain of
+    fused multiply-adds, fma(W2k, t2, fma(W1k, t1, W0k t0)), in exact rational arithmetic)."""
+    W, t = viewmat[:3, :3], viewmat[:3, 3]
+    centre = np.empty(3)
+    for k in range(3):
+        if rounding == "sequential":
+            centre[k] = -(float(W[0, k] * t[0]) + float(W[1, k] * t[1]) + float(W[2, k] * t[2]))
+        else:
+            acc = float(Fraction(W[0, k]) * Fraction(t[0]))
+            for j in (1, 2):
+                acc = float(Fraction(W[j, k]) * Fraction(t[j]) + Fraction(acc))
+            centre[k] = -acc
+    return centre
+
+
 @pytest.mark.spec("VG-COV", "VG-PROJ", "VG-SH")
+@pytest.mark.parametrize("rounding", ["sequential", "fma"])
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("sh_degree", [None, 1, 3])
-def test_hard_cases_match_the_torch_path(mode, sh_degree):
+def test_hard_cases_match_the_torch_path(mode, sh_degree, rounding):
     # Degenerate Gaussians where a derivative is a convention: zero and denormal
     # quaternions (the identity, no gradient), a centre at the camera (culled; its viewing
     # direction is +z, no gradient through it), flat discs (scale 1e-9), centres far
     # outside the clamp and behind the camera. The numba preparation must give the torch
-    # path's outputs and gradients for them, not merely finite ones.
+    # path's outputs and gradients for them, not merely finite ones. The camera centre is
+    # rounded with and without FMA: an Intel CPU's compiled path once contracted to FMA and
+    # saw a direction of 1e-17 where torch saw an exact 0 (VIEW_DIRECTION_MIN).
     rng = np.random.default_rng(7)
     scene = random_scene(rng, 60, 24, 18, scale_px=(0.05, 8.0), margin=40.0, depth=(-1.0, 4.0), sh_degree=sh_degree)
     scene["scales"][::5, 2] = 1e-9
     scene["quats"][1] = 0.0
     scene["quats"][2] = 1e-200
-    camera_centre = -scene["viewmat"][:3, :3].T @ scene["viewmat"][:3, 3]
-    scene["means"][3] = camera_centre
+    scene["means"][3] = camera_centre(scene["viewmat"], rounding)
     outs = []
     for prepare in (prepare_torch, prepare_numba):
         t = scene_to_torch(scene, torch.float64, "cpu", requires_grad=True)
@@ -160,6 +181,10 @@ def test_hard_cases_match_the_torch_path(mode, sh_degree):
     assert not v_n[3]
     for k, (a, b) in enumerate(zip(f_n, f_t)):
         assert_close(a, b.detach().numpy(), 1e-12, name=f"output {k}", floor=1.0)
+    if sh_degree is not None:
+        plus_z = ref_sh.sh_to_color(scene["colors"][3:4], np.array([[0.0, 0.0, 1.0]]), sh_degree)
+        for rgb in (f_n[5], f_t[5]):
+            np.testing.assert_array_equal(rgb[3:4].detach().numpy(), plus_z)
     # Flat discs: conic and compensation are ill-conditioned (det ~ eps2d times a tiny
     # variance), so their gradients agree to the conditioning, ~1e-11 (observed <= 4e-11).
     for name, a, b in zip(("means", "quats", "scales", "opacities", "colors"), g_n, g_t):

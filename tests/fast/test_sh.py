@@ -9,6 +9,7 @@ from hypothesis.extra import numpy as hnp
 
 from tests.fast.render_cases import DEVICE_SETTINGS, check_agreement, check_float32, gradcheck_fn, to_torch
 from tests.ref.cameras import rigid_viewmat
+from velogauss_core.constants import VIEW_DIRECTION_MIN
 from velogauss_fast.sh import sh_to_color, viewing_directions
 from velogauss_ref import sh as ref
 
@@ -89,14 +90,15 @@ def test_coefficients_beyond_the_degree_are_ignored(device, dtype, degree, rng):
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_direction_length_does_not_matter_and_zero_means_plus_z(device, dtype, rng):
     sh = to_torch(rng.normal(scale=0.1, size=(3, 16, 3)), dtype, device)
-    dirs = torch.tensor([[0.0, 0.0, 0.0], [0.3, -0.4, 1.2], [0.0, 0.0, 0.0]], dtype=dtype, device=device,
-                        requires_grad=True)
+    # The third is shorter than VIEW_DIRECTION_MIN: rounding noise of a camera centre.
+    dirs = torch.tensor([[0.0, 0.0, 0.0], [0.3, -0.4, 1.2], [0.5 * VIEW_DIRECTION_MIN, 0.0, 0.0]], dtype=dtype,
+                        device=device, requires_grad=True)
     rgb = sh_to_color(sh, dirs, 3)
     plus_z = torch.tensor([[0.0, 0.0, 1.0]], dtype=dtype, device=device)
     assert torch.equal(rgb[[0, 2]], sh_to_color(sh[[0, 2]], plus_z.expand(2, 3), 3))
     tol = 1e-6 if dtype == torch.float32 else 1e-14  # a few roundings of O(1) colours
     torch.testing.assert_close(sh_to_color(sh[1:2], 7.5 * dirs[1:2].detach(), 3), rgb[1:2], rtol=0, atol=tol)
-    # The zero direction is replaced by a constant: no gradient reaches it, and none is NaN.
+    # The short directions are replaced by a constant: no gradient reaches them, and none is NaN.
     (g,) = torch.autograd.grad((rgb * to_torch(rng.normal(size=(3, 3)), dtype, device)).sum(), dirs)
     assert torch.isfinite(g).all() and torch.equal(g[[0, 2]], torch.zeros_like(g[[0, 2]]))
     assert g[1].abs().sum() > 0

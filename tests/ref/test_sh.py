@@ -9,6 +9,7 @@ from scipy.special import sph_harm_y
 
 from tests.ref.cameras import rigid_viewmat
 from tests.ref.gradcheck import check_grads_fd
+from velogauss_core.constants import VIEW_DIRECTION_MIN
 from velogauss_ref.sh import C0, C1, camera_centre, sh_basis, sh_to_color, viewing_directions
 
 # Sums of at most 16 O(1) float64 products.
@@ -79,9 +80,15 @@ def test_direction_length_and_higher_bands_are_ignored(sh, dirs, degree, c):
 
 
 @pytest.mark.spec("VG-SH")
-def test_zero_direction_is_plus_z():
+def test_a_direction_shorter_than_the_threshold_is_plus_z():
+    # Rounding noise of the camera centre (1e-17) must not pick a colour (VIEW_DIRECTION_MIN).
     sh = np.random.default_rng(0).normal(size=(1, 16, 3)) * 0.2
-    np.testing.assert_array_equal(sh_to_color(sh, np.zeros((1, 3)), 3), sh_to_color(sh, np.array([[0.0, 0.0, 1.0]]), 3))
+    tilted = np.array([[1.0, 2.0, -2.0]]) / 3.0
+    plus_z = sh_to_color(sh, np.array([[0.0, 0.0, 1.0]]), 3)
+    for d in (np.zeros((1, 3)), 3e-17 * tilted, 0.99 * VIEW_DIRECTION_MIN * tilted):
+        np.testing.assert_array_equal(sh_to_color(sh, d, 3), plus_z)
+    np.testing.assert_allclose(sh_to_color(sh, 1.01 * VIEW_DIRECTION_MIN * tilted, 3), sh_to_color(sh, tilted, 3),
+                               atol=TOL)
 
 
 @pytest.mark.spec("VG-SH")

@@ -27,6 +27,7 @@ from velogauss_core.constants import (
     GAUSSIAN_EXTENT_SIGMA,
     NEAR_PLANE,
     QUAT_ZERO_NORM_SQ,
+    VIEW_DIRECTION_MIN,
 )
 from velogauss_fast.projection import RADIUS_CAP
 from velogauss_fast.sh import C0, C1, C2, C3
@@ -106,10 +107,11 @@ def _sandwich(A, Sigma):
 
 @numba.njit(**_JIT)
 def _unit_direction(mx, my, mz, c):
-    """d / |d| of the viewing direction d = mean - camera centre c, |d|, and whether d = 0 (VG-SH: +z)."""
+    """d / |d| of the viewing direction d = mean - camera centre c, |d|, and whether |d| is below
+    VIEW_DIRECTION_MIN (VG-SH: then +z)."""
     dx, dy, dz = mx - c[0], my - c[1], mz - c[2]
     n2 = dx * dx + dy * dy + dz * dz
-    if n2 == 0:
+    if n2 < VIEW_DIRECTION_MIN * VIEW_DIRECTION_MIN:
         return 0.0, 0.0, 1.0, 1.0, True
     n = math.sqrt(n2)
     return dx / n, dy / n, dz / n, n, False
