@@ -58,7 +58,7 @@ fi
 run=$(mktemp -d)/run
 echo "gsplat on the path: $gsplat_ok; $(( $(date +%s) - start )) s into the run" >"$out/train.log"
 t0=$(date +%s.%N)
-timeout "$(left)" python3 -m velogauss.cli train --out "$run" --device cuda >>"$out/train.log" 2>&1
+timeout "$(left)" python3 -m velogauss train --out "$run" --device cuda >>"$out/train.log" 2>&1
 code=$?
 echo "train: exit $code, wall $(python3 -c "print(f'{$(date +%s.%N) - $t0:.1f}')") s" >>"$out/train.log"
 cp "$run/metrics.md" "$out/" 2>/dev/null

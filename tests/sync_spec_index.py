@@ -1,10 +1,11 @@
 """Rewrite the `tests = [...]` lists of spec/index.toml from the @pytest.mark.spec markers,
-and the spec table of README.md from spec/index.toml.
+and the spec table of spec/README.md from spec/index.toml.
 
 Usage: python -m tests.sync_spec_index   (run from the repository root)
 """
 
 import json
+import os
 import pathlib
 import re
 import sys
@@ -16,7 +17,7 @@ from tests.spec_markers import marked_tests
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 INDEX = ROOT / "spec" / "index.toml"
-README = ROOT / "README.md"
+SPEC_README = ROOT / "spec" / "README.md"
 TABLE_START, TABLE_END = "<!-- spec-table:start -->", "<!-- spec-table:end -->"
 
 
@@ -55,22 +56,28 @@ def main():
     unknown = sorted(set(table) - set(re.findall(r'^id = "([^"]+)"', text, re.M)))
     if unknown:
         sys.exit(f"markers name IDs missing from the index: {unknown}")
-    README.write_text(with_spec_table(README.read_text(), tomllib.loads(text)["equation"]))
+    SPEC_README.write_text(with_spec_table(SPEC_README.read_text(), tomllib.loads(text)["equation"]))
 
 
 def spec_table(entries):
-    """The README's Markdown table: ID, title, reference function, fast twin, test count."""
+    """spec/README.md's Markdown table: ID, title, reference function, fast twin, test count.
+    Each ID links to its section's file, relative to spec/ (where the table lives)."""
     rows = ["| ID | equation | reference | fast twin | tests |", "|---|---|---|---|---|"]
     for e in entries:
+        link = pathlib.Path(os.path.relpath(ROOT / e["section"], SPEC_README.parent)).as_posix()
         rows.append(
-            f"| [{e['id']}]({e['section']}) | {e['title']} | `{e['ref']}` | `{e['fast']}` | {len(e['tests'])} |"
+            f"| [{e['id']}]({link}) | {e['title']} | `{e['ref']}` | `{e['fast']}` | {len(e['tests'])} |"
         )
     return "\n".join(rows)
 
 
-def with_spec_table(readme, entries):
-    """`readme` with the text between the spec-table markers replaced by spec_table(entries)."""
-    head, _, rest = readme.partition(TABLE_START)
+def with_spec_table(page, entries):
+    """`page` (spec/README.md's text) with the text between the spec-table markers replaced
+    by spec_table(entries). The markers must be there: a page without them is an error, not
+    a page with a table appended."""
+    if TABLE_START not in page or TABLE_END not in page:
+        raise ValueError(f"{SPEC_README}: the markers {TABLE_START} and {TABLE_END} are missing")
+    head, _, rest = page.partition(TABLE_START)
     _, _, tail = rest.partition(TABLE_END)
     return f"{head}{TABLE_START}\n{spec_table(entries)}\n{TABLE_END}{tail}"
 

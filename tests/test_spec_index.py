@@ -1,9 +1,10 @@
 """spec/index.toml is complete: every ID has an importable reference, an importable fast
-twin, and tests that exist and carry its marker."""
+twin, and tests that exist and carry its marker; spec/README.md's table is generated from it."""
 
 import importlib
 import json
 import pathlib
+import re
 import subprocess
 import sys
 import tomllib
@@ -60,11 +61,23 @@ def test_index_tests_match_markers():
         )
 
 
-def test_readme_spec_table_is_current():
-    from tests.sync_spec_index import with_spec_table
+def test_spec_readme_table_is_current():
+    from tests.sync_spec_index import SPEC_README, with_spec_table
 
-    readme = (ROOT / "README.md").read_text()
-    assert readme == with_spec_table(readme, INDEX), "README spec table is stale; run `python -m tests.sync_spec_index`"
+    page = SPEC_README.read_text()
+    assert page == with_spec_table(page, INDEX), (
+        "spec/README.md's spec table is stale; run `python -m tests.sync_spec_index`"
+    )
+
+
+def test_spec_table_links_resolve():
+    """Every ID of spec/README.md's table links to a file that exists, relative to spec/."""
+    from tests.sync_spec_index import SPEC_README
+
+    links = re.findall(r"^\| \[VG-[^\]]+\]\(([^)]+)\)", SPEC_README.read_text(), re.M)
+    assert len(links) == len(INDEX)
+    missing = [link for link in links if not (SPEC_README.parent / link).is_file()]
+    assert not missing, f"spec/README.md links to missing files: {missing}"
 
 
 def test_every_constant_is_named_in_the_spec():

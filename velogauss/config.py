@@ -30,7 +30,7 @@ from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
 from velogauss_core.motion import (ABLATIONS, EFFECTS, INTEGRATORS, AccelerationForm, Ablation, Effect, Integrator,
-                                   MotionSizes, PatternForm, QueryCode, Scheme)
+                                   MotionSizes, PatternForm, Scheme)
 from velogauss_core.rendering import RasterizeMode
 
 
@@ -65,9 +65,9 @@ class DataConfig:
     """Which scene and how it is loaded (velogauss.data.load_scene)."""
 
     dir: str = ""  # the scene folder; recorded by `velogauss train`
-    max_time: _float(gt=0.0, lt=1.0) = 0.75  # end of the observed window; later frames are the future
-    half_res: Flag = False
-    background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)
+    max_time: _float(gt=0.0, lt=1.0) = 0.75  # end of the observed window; later frames are the future to predict
+    half_res: Flag = False  # load the images at half resolution (quick looks)
+    background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)  # RGB behind the Gaussians and under RGBA images (white)
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -75,50 +75,24 @@ class _ModelChoices:
     """The first keys of `ModelConfig`, a base of it only so that config.toml lists them
     before the networks' sizes (a dataclass's inherited fields come first, base by base)."""
 
-    # Effects the motion may use, or "auto": the scene's declared effects (scene.json),
-    # else every effect.
+    # Effects the motion may use; "auto": the scene's declared ones (scene.json), else all but oscillation.
     effects: Union[Literal["auto"], Annotated[tuple[Effect, ...], Field(min_length=1)]] = "auto"
-    # Divergence loss on/off, or "auto": scene.json's `incompressible`, else true.
+    # The divergence loss (VG-DIV) on or off; "auto": scene.json's `incompressible`, else on.
     incompressible: Union[Literal["auto"], Flag] = "auto"
-    # How the learned acceleration depends on time (spec/physics.md): "poly" a quadratic in t
-    # per motion pattern (VG-ACC), "rigid" a body spinning at a constant rate whose centre falls
-    # under a constant acceleration (VG-ACC-RIGID), or "auto": rigid when the effects are
-    # rigid (translation, rotation, gravity), else poly. "poly" stays the default: "rigid"
-    # helped multi and cost toss 0.7 dB of extrapolation (benchmarks/FIDELITY.md, section 6).
+    # The acceleration's time form: "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or "auto" (rigid for rigid
+    # effects); "poly", as "rigid" helped one rigid scene and hurt another (benchmarks/FIDELITY.md, section 6).
     acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
-    # How the motion patterns depend on time (spec/motion.md): "mlp" the time network of
-    # VG-COEF, "rigid" bodies spinning at a constant rate about a centre under a constant
-    # acceleration (VG-COEF-RIGID), "harmonic" oscillators of learned frequency with their
-    # own acceleration (VG-COEF-HARM, VG-ACC-HARM; `acceleration` is then not read), or
-    # "auto": harmonic when the effects include oscillation, else rigid when they are rigid
-    # (translation, rotation, gravity), else mlp. "auto" is the default: on toss, rigid took
-    # the future velocity error from 0.164 to 0.016 (benchmarks/FIDELITY.md, section 1).
+    # The motion patterns' time form: "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or
+    # "auto": the form the scene's effects call for, which extrapolates best (FIDELITY.md, section 1).
     patterns: Union[Literal["auto"], PatternForm] = "auto"
-    # How the mixing weights of VG-COEF start: "uniform" as the networks' random weights leave
-    # them (every pattern ~1/K everywhere), "clusters" fitted to a k-means partition of the
-    # initial points, each region on its own pattern (velogauss.train.mixing), or "auto":
-    # clusters when the scene declares a `static` body beside moving ones (several motions to
-    # tell apart), else uniform. On multi, clusters took the velocity error from 0.566 / 0.765
-    # to 0.38 / 0.62; on toss, one body, they made it worse (benchmarks/FIDELITY.md, section 0b).
+    # How the mixing weights start: "uniform", "clusters" (one k-means region per pattern, velogauss.train.mixing)
+    # or "auto": clusters only beside a static body, as they cost a single body (FIDELITY.md, section 0b).
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
-    # Where rigid patterns' centres (VG-COEF-RIGID's knots) come from: "learned" from the
-    # images alone, from the still scene B = 0; "hull", anchored when the motion starts on the
-    # centroid of the volume the moving Gaussians' convex hull encloses (a uniform body's
-    # centre of mass), the centre at t = 0 then held there (velogauss.train.centres); or
-    # "auto": hull for rigid patterns of one body (the mixing starts uniform) whose centre moves
-    # on a parabola (gravity), else learned.
-    # On toss, learned centres sat 0.05-0.13 off the box's centre and its future drifted
-    # (benchmarks/FIDELITY.md, section 0a).
-    rigid_centre: Literal["auto", "learned", "hull"] = "auto"
-    # The velocity of a material point between the Gaussians (velocity queries, evaluation,
-    # viewer; training and rendering move the Gaussians by their own weights either way):
-    # "gaussians" takes the mixing weights of its nearest Gaussians (VG-FIELD-GAUSS), "network"
-    # the code network at the point (VG-FIELD). On multi the network carried the ground's
-    # still pattern into the bodies' bottoms, whose Gaussians move with the bodies: velocity
-    # error 0.196 -> 0.119 (benchmarks/FIDELITY.md, section 0e).
-    query_code: QueryCode = "gaussians"
-    ablation: Ablation = "full"
-    sh_degree: _int(ge=0, le=3) = 1  # VG-SH is written up to degree 3
+    # Rigid patterns' centres: "hull", anchored on the moving Gaussians' hull centroid (velogauss.train.centres),
+    # or "auto": hull for one body on a parabola, where learned ones drift off it, else learned (section 0a).
+    rigid_centre: Literal["auto", "hull"] = "auto"
+    ablation: Ablation = "full"  # the paper's ablations (velogauss.model.spec); "full" keeps PDS, ADF and GPC
+    sh_degree: _int(ge=0, le=3) = 1  # spherical-harmonics degree of the colours (VG-SH is written up to 3)
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -130,28 +104,19 @@ class ModelConfig(MotionSizes, _ModelChoices):
     n_freqs_adf_t, which `MotionConfig` shares), then the fields below.
     """
 
-    integrator: Integrator = "rk2"  # the paper integrates with RK2
-    # Largest integration step in normalised time (one frame of 21); a step beyond the whole
-    # window [0, 1] would not be a step.
-    step: _float(gt=0.0, le=1.0) = 0.05
-    # The ADF has only seen t <= max_time; beyond it, its correction is held at its value
-    # at max_time instead of evaluating sinusoids of an unseen t (ablation deform-only,
-    # a DefGS-style model, evaluates the network at every t, as DefGS does).
+    integrator: Integrator = "rk2"  # VG-INTEG's method; RK2, as the paper
+    step: _float(gt=0.0, le=1.0) = 0.05  # largest integration step in normalised time: one frame of 21
+    # Hold the ADF's correction at its value at max_time beyond the window, where it never saw t
+    # (deform-only, a DefGS-style model, evaluates it at every t, as DefGS does).
     adf_clamp_time: Flag = True
-    # How x(t) comes from the velocity and the ADF (spec/motion.md): "integrate" (a) from the
-    # canonical state at t = 0, "adf-step" (b) the ADF's state carried by the velocity
-    # (VG-CARRY). (a) stays the default: it extrapolated best (benchmarks/FIDELITY.md).
+    # How x(t) comes from the velocity and the ADF: "integrate" (a) from t = 0, or "adf-step" (b), the ADF's
+    # state carried by the velocity (VG-CARRY); (a) extrapolated best (benchmarks/FIDELITY.md).
     scheme: Scheme = "integrate"
-    # Scheme "adf-step": |t - t_start| of VG-CARRY in training (one frame of 21, the authors'
-    # step); at most the whole normalised window, 0 trains the ADF alone inside it.
-    carry_offset: Unit = 0.05
+    carry_offset: Unit = 0.05  # scheme "adf-step": |t - t_start| of VG-CARRY in training, one frame, as the authors'
     init_points: Count = 5000  # random initial Gaussians when the scene has no points3d.ply
-    init_opacity: _float(gt=0.0, lt=1.0) = 0.1  # a logit is taken
-    # How splats are filtered (spec/rendering.md, VG-RENDER): "classic" as 3DGS (dilated by
-    # 0.3 px^2), or "antialiased", Mip-Splatting's 2D filter (0.1 px^2, the opacity times the
-    # splat's integral before the dilation over its integral after). Under "classic" the
-    # learned rate of strain came out 4-7 % too large on grow and shear; "antialiased" was
-    # better on every scene (benchmarks/FIDELITY.md, section 0c).
+    init_opacity: _float(gt=0.0, lt=1.0) = 0.1  # every Gaussian's initial opacity, as 3DGS's
+    # How splats are filtered (VG-RENDER): "classic", 3DGS's dilation, or "antialiased", Mip-Splatting's 2D
+    # filter, which learned the rate of strain more closely on every scene (FIDELITY.md, section 0c).
     rasterize_mode: RasterizeMode = "antialiased"
 
 
@@ -159,75 +124,49 @@ class ModelConfig(MotionSizes, _ModelChoices):
 class TrainConfig:
     """Optimisation schedule (3DGS-style learning rates, see velogauss.train.optim)."""
 
-    iterations: Count = 3000
-    seed: _int(ge=0) = 0  # NumPy refuses negative seeds
+    iterations: Count = 3000  # the length of every benchmarked run (SCHEDULE_ITERATIONS)
+    seed: _int(ge=0) = 0  # of NumPy's and torch's generators; NumPy refuses negative seeds
     device: str = "cpu"  # checked against this machine's devices by the command line
-    # CPU threads of torch and of the compositing kernels; 0: one torch thread for the many
-    # small operations, one compositing thread per available core (velogauss.threads, which
-    # says why). More than a machine has cores only makes threads wait for each other.
+    # CPU threads of torch and of the compositing kernels; 0: velogauss.threads chooses (one torch thread, one
+    # compositing thread per core), as more threads than cores only wait for each other.
     threads: _int(ge=0, le=1024) = 0
-    # The schedule's keys (here, physics.ramp and densify's) default to "auto": their share
-    # of `iterations` in SCHEDULE, so a longer or shorter run keeps the schedule's shape.
-    warmup: Span = "auto"  # iterations on the t = 0 frames only, motion frozen
+    warmup: Span = "auto"  # iterations on the t = 0 frames only, motion frozen ("auto": SCHEDULE's share)
     curriculum: Span = "auto"  # iterations over which the sampled times open up to max_time
-    # Training views rendered per iteration, all at one time (velogauss.train.sampling): the
-    # state at that time is computed once and seen from several cameras, so a Gaussian's
-    # position, and the velocity that carries it, is constrained in depth within one step.
-    # Three views: on toss the velocity error fell from 0.23 / 0.27 to 0.14 / 0.23 (seed 0,
-    # observed / future) for 1.6x the time of a step (benchmarks/FIDELITY.md, "Defaults").
+    # Training views per iteration, all of one time: several cameras pin the positions in depth, which one
+    # view cannot (benchmarks/FIDELITY.md, "Defaults").
     views: _int(ge=1, le=64) = 3
-    lr_means: Rate = 1.6e-4  # times the camera extent, decayed to lr_means_final
+    lr_means: Rate = 1.6e-4  # times the camera extent, decayed to lr_means_final (3DGS's)
     lr_means_final: Rate = 1.6e-6
-    lr_sh: Rate0 = 2.5e-3  # degree-0 coefficients; higher degrees get lr_sh / 20
+    lr_sh: Rate0 = 2.5e-3  # degree-0 coefficients; higher degrees get lr_sh / 20 (3DGS's)
     lr_opacity: Rate0 = 0.05
     lr_scales: Rate0 = 5e-3
     lr_quats: Rate0 = 1e-3
     lr_motion: Rate = 1e-3  # motion networks, decayed to lr_motion_final
     lr_motion_final: Rate = 1e-4
-    lr_acc: Rate = 0.05  # the acceleration polynomial Q (see velogauss.train.optim)
-    # Where lr_acc's decay over the motion's schedule ends: 10x below, as the networks' (the
-    # ratio it had before it was a key). A 100x decay (5e-4) over the whole schedule starves
-    # short runs (the end-to-end test's 450 iterations: spin's velocity error 0.12-0.14
-    # against 0.05-0.07); the cooldown below lowers only the end (benchmarks/FIDELITY.md,
-    # section 0d).
+    # The "acc" group (Q, rigid patterns, oscillators' coefficients): world quantities, which need a larger
+    # rate than the networks' weights (velogauss.train.optim).
+    lr_acc: Rate = 0.05
+    # Where lr_acc's decay ends: 10x lower, as the networks'; a 100x decay starves short runs (FIDELITY.md, 0d).
     lr_acc_final: Rate = 5e-3
-    # The acceleration group's cooldown: over this last fraction of the iterations its rate
-    # is scaled down further, log-linearly, to lr_acc_cooled at the last one (0: off). The
-    # group holds world quantities (the rigid patterns' spins and knots), which Adam moves by
-    # up to its rate per step whatever the gradient; at 5e-3, a quarter of a pixel per step
-    # at toss's box, the motion still wandered at the end, and where training stopped decided
-    # the result (one toss seed in ten ended 7.6 dB below its interpolation).
+    # The last fraction of the iterations over which the acc rate falls on to lr_acc_cooled (0: off), so that
+    # the patterns' world quantities stop wandering before training ends (FIDELITY.md, section 0d).
     acc_cooldown: _float(ge=0.0, lt=1.0) = 0.1
     lr_acc_cooled: Rate = 5e-4
-    # L2 on the ADF's displacement, so velocity carries the motion; at 0.1 the ADF took the
-    # motion over on toss (extrapolation 16.6 dB against 20.5 dB at 1.0), and at 10 the
-    # velocity fits the paths closer than at 1.0 (benchmarks/FIDELITY.md, "Defaults").
+    # L2 on the ADF's displacement, so that the velocity, not the ADF, carries the motion (FIDELITY.md, "Defaults").
     lambda_adf: _float(ge=0.0) = 10.0
-    # Iteration at which the ADF starts learning. "auto": with the motion (the warm-up's end)
-    # for deform-only, scheme "adf-step" and the time network's patterns, else once the
-    # curriculum has opened the whole window (velogauss.train.loop, benchmarks/FIDELITY.md 0f);
-    # "window": the rule before that (with the motion for deform-only and "adf-step" only); -1,
-    # what the configs of that time hold, is "window", so that they resume as they trained;
-    # n >= 0: iteration n.
-    adf_start: Union[Literal["auto", "window"], _int(ge=-1)] = "auto"
-    # Scheme "adf-step": weight of VG-LOSS-CARRY (the velocity fitted to the ADF's paths);
-    # 0 disables it, a negative one would reward the gap.
+    # Iteration at which the ADF starts learning; "auto": with the motion under the time network's patterns,
+    # deform-only and "adf-step", else once the curriculum has opened the window (FIDELITY.md, section 0f).
+    adf_start: Union[Literal["auto"], _int(ge=0)] = "auto"
+    # Scheme "adf-step": weight of VG-LOSS-CARRY (the velocity fitted to the ADF's paths); 0, off, by default.
     lambda_carry: _float(ge=0.0) = 0.0
-    # VG-LOSS-CARRY: largest |t - t_a| drawn, in normalised time (a step of 0 teaches nothing,
-    # and the window is at most [0, 1]).
+    # VG-LOSS-CARRY: largest |t - t_a| drawn, in normalised time (at most the whole window [0, 1]).
     carry_horizon: _float(gt=0.0, le=1.0) = 0.25
     carry_points: Count = 2048  # VG-LOSS-CARRY: moving Gaussians drawn per iteration
-    # VG-LOSS-MIX: weight of the mixing weights' entropy (affine velocity), which pushes each
-    # particle to commit to one motion pattern; 0 disables it. On multi (2 seeds) 1e-3 took the
-    # velocity error from 0.365 / 0.564 to 0.161 / 0.162; 1e-4, 5e-4, 3e-3 and 1e-2 did less,
-    # and it needs the patterns to start apart (from the uniform start every body took one
-    # pattern: 0.66 / 0.73). On the one-body scenes the velocity error stayed or fell; shear
-    # and pulse lost 0.2-0.5 dB of PSNR (benchmarks/FIDELITY.md, section 0).
+    # VG-LOSS-MIX: weight of the mixing weights' entropy, which makes each particle commit to one motion
+    # pattern, so that bodies moving apart do not share one (FIDELITY.md, section 0).
     lambda_mix: _float(ge=0.0) = 1e-3
     mix_points: Count = 2048  # VG-LOSS-MIX: moving Gaussians drawn per iteration
-    # After the warm-up only the motion trains (the error budget's optimisation floor,
-    # benchmarks/FIDELITY.md).
-    motion_only: Flag = False
+    motion_only: Flag = False  # after the warm-up only the motion trains (the error budget's optimisation floor)
     eval_every: Every = 500  # PSNR on the interpolation split -> log.jsonl
     checkpoint_every: Every = 500  # 0: only at the end (and on Ctrl-C)
 
@@ -236,24 +175,17 @@ class TrainConfig:
 class PhysicsConfig:
     """Global physical constraints on collocation points (VG-LOSS-PHYS)."""
 
-    # The residuals are O(|v|²/L) ~ 10 in normalised time, so their squares are ~100 times
-    # the photometric loss at these weights: strong enough to bind the future, weak enough
-    # not to drown the images' gradients while the velocity forms (measured on toss).
-    # A negative weight would reward breaking the physics. "auto": TRANSPORT_WEIGHT, or 0 with
-    # oscillating motion patterns (resolve_transport says why).
+    # VG-TRANSPORT's weight; "auto": TRANSPORT_WEIGHT, or 0 under oscillating patterns (resolve_transport).
     lambda_transport: Union[Literal["auto"], _float(ge=0.0)] = "auto"
+    # VG-DIV's weight, as the transport's: strong enough to bind the motion, weak enough not to drown the images.
     lambda_div: _float(ge=0.0) = 1e-3
-    ramp: Span = "auto"  # iterations over which both weights rise linearly from 0
-    n_points: Count = 1024  # collocation points per iteration, one random time each
-    bounds_margin: _float(ge=0.0) = 0.1  # the box grows by this fraction of its size on each side
-    # Where the collocation points lie: "box" uniform in the grown box, "gaussians" near the
-    # moving Gaussians at the collocation time (where the residual binds the particles). Near
-    # the Gaussians the residual fits the acceleration to the bodies, not to empty space: on
-    # toss the future velocity error fell from 0.217 to 0.164 and extrapolation rose 0.6 dB,
-    # grow improved, shear did not change, for 11-13 % more time (benchmarks/FIDELITY.md).
+    ramp: Span = "auto"  # iterations over which both weights rise linearly from 0, while the velocity forms
+    n_points: Count = 1024  # collocation points per iteration, at one random time in [0, 1]
+    bounds_margin: _float(ge=0.0) = 0.1  # "box": the scene box grows by this fraction of its size on each side
+    # Where the collocation points lie: "box" uniform in the grown box, or "gaussians" near the moving
+    # Gaussians, where the residual binds the bodies rather than empty space (benchmarks/FIDELITY.md).
     placement: Placement = "gaussians"
-    # Placement "gaussians": standard deviation of the normal offset, as a fraction of the box
-    # diagonal (0: exactly at the means).
+    # "gaussians": the normal offsets' standard deviation, a fraction of the box diagonal (0: at the means).
     jitter: _float(ge=0.0) = 0.02
 
 
@@ -261,23 +193,20 @@ class PhysicsConfig:
 class DensifyConfig:
     """Adaptive density control (3DGS): clone, split, prune, opacity reset."""
 
-    start: Span = "auto"
-    until: Span = "auto"
-    every: Union[Literal["auto"], Count] = "auto"
-    # Mean |d loss / d mean2d| in NDC units. 3DGS uses 2e-4 on ~800 px images; on the
-    # 64 px synthetic scenes that cloned whole objects into ~20k Gaussians while the
-    # motion is still misfit, so the default is stricter. At 128 px it gives about the same
-    # counts (toss 7.7k against 8.0k, benchmarks/FIDELITY.md).
+    start: Span = "auto"  # first iteration of densification ("auto": SCHEDULE's share)
+    until: Span = "auto"  # last iteration of densification
+    every: Union[Literal["auto"], Count] = "auto"  # iterations between densification rounds
+    # Mean |d loss / d mean2d| in NDC units that clones or splits a Gaussian; stricter than 3DGS's 2e-4, which on
+    # the 64 px synthetic scenes cloned whole objects while the motion was still misfit (FIDELITY.md).
     grad_threshold: _float(gt=0.0) = 5e-4
-    percent_dense: Unit = 0.01  # clone below, split above this fraction of the extent
-    prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # at 1 every Gaussian would be pruned
-    opacity_reset_every: Period = "auto"
-    max_gaussians: Count = 10000
-    # "fixed": up to max_gaussians at every round; "linear": the cap rises from 0 at `start`
-    # to max_gaussians at `until`, so a scene that would reach it early spreads its budget
-    # over the window instead of spending it before the motion has settled.
+    percent_dense: Unit = 0.01  # clone below, split above this fraction of the camera extent (3DGS's)
+    prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # prune below this opacity (at 1 every Gaussian would go)
+    opacity_reset_every: Period = "auto"  # iterations between opacity resets (3DGS's floaters' cure)
+    max_gaussians: Count = 10000  # the count densification never exceeds
+    # "fixed": up to max_gaussians at every round; "linear": the cap rises from 0 at `start` to max_gaussians
+    # at `until`, so that a scene does not spend its budget before the motion has settled.
     cap_schedule: Literal["fixed", "linear"] = "fixed"
-    static_every: Period = "auto"  # re-detect particles that do not move
+    static_every: Period = "auto"  # iterations between detections of particles that do not move
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -291,12 +220,10 @@ class Config:
 
 _ADAPTER = TypeAdapter(Config)
 
-# The default schedule, in iterations of a run of SCHEDULE_ITERATIONS: the one every benchmark
-# measured (benchmarks/FIDELITY.md). An "auto" key gets its value here times
-# train.iterations / SCHEDULE_ITERATIONS, so that a run of any length warms up, opens the time
-# window, ramps the physics and densifies over the same shares of its iterations. Fixed
-# counts left a 2000-iteration run 600 iterations on the whole window, and it extrapolated
-# 5 dB worse than with the curriculum shortened to match (FIDELITY.md, section 4).
+# The default schedule, in iterations of a run of SCHEDULE_ITERATIONS (the one every benchmark
+# measured). An "auto" key gets its value here times train.iterations / SCHEDULE_ITERATIONS, so
+# that a run of any length keeps the schedule's shape: fixed counts leave a shorter run too few
+# iterations on the whole window (benchmarks/FIDELITY.md, section 4).
 SCHEDULE_ITERATIONS = 3000
 SCHEDULE = {"train.warmup": 200, "train.curriculum": 1200, "physics.ramp": 1200, "densify.start": 200,
             "densify.until": 2000, "densify.every": 100, "densify.opacity_reset_every": 1000,
@@ -305,7 +232,8 @@ SCHEDULE = {"train.warmup": 200, "train.curriculum": 1200, "physics.ramp": 1200,
 _PERIODS = ("densify.every", "densify.opacity_reset_every", "densify.static_every")
 
 
-# VG-LOSS-PHYS's transport weight where "auto" keeps the transport residual on.
+# VG-LOSS-PHYS's transport weight where "auto" keeps the transport residual on: its residuals are
+# O(|v|²/L), so this binds the future without drowning the images' gradients while the velocity forms.
 TRANSPORT_WEIGHT = 1e-3
 
 
@@ -317,9 +245,7 @@ def resolve_transport(cfg, pattern_form, saved=None):
 
     Why 0 there: the oscillating patterns continue the motion past the window by themselves,
     and their acceleration (VG-ACC-HARM) lags the velocity while it trains, so the residual
-    held pulse's stretch rate 26-29 % low. Without it pulse extrapolated at 33.0 dB against
-    30.0 (velocity error 0.026 / 0.032 against 0.059 / 0.069; weight 1e-4: 31.4 dB, seed 0),
-    benchmarks/FIDELITY.md, section 8.
+    holds the motion back (benchmarks/FIDELITY.md, section 8).
     """
     if cfg.physics.lambda_transport != "auto":
         return cfg

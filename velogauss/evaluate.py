@@ -26,12 +26,10 @@ spaced times in [0, 1]; those `> max_time` are the future):
   Two velocities are scored: the particle velocity `particle_velocity(x0, x, t)` (the
   mixing weights frozen at the material point's start, as along a Gaussian's path; keys
   `relative_l2`, `mean_abs`) and the Eulerian field `velocity_at(x, t)` (the weights read at
-  x at time t; key `field_relative_l2`). The points are surface points, not Gaussians: under
-  the default `model.query_code = "gaussians"` both take the weights of their nearest
-  Gaussians (VG-FIELD-GAUSS: at x0 among the canonical means, at x among the Gaussians'
-  positions at t), under "network" the code network's at x0 or x (VG-FIELD, the field the
-  physics residuals constrain, which with several bodies moving apart reads at x(t) the code
-  of whatever sat at x at t = 0).
+  x at time t; key `field_relative_l2`). The points are surface points, not Gaussians: with
+  the affine velocity both take the weights of their nearest Gaussians (VG-FIELD-GAUSS: at x0
+  among the canonical means, at x among the Gaussians' positions at t), as the code network
+  at x(t) would read the code of whatever sat at x at t = 0 (`MotionSpec.query_code`).
   Predicting zero velocity gives a relative error of exactly 1. A model without a velocity
   field (the "deform-only" ablation) has no velocity to score: every velocity error is None.
 - trajectories: the Gaussians whose canonical mean `μ0 = tracked_positions(0)` lies inside
@@ -207,7 +205,7 @@ def trajectory_error(model, scene, max_time, times=MOTION_EVAL_TIMES):
     "observed"/"future"/"all": {...}}`; with no Gaussian selected the distances are None.
     """
     mu0 = query(model.tracked_positions, 0.0)
-    opacity = query(lambda t: model.gaussians_at(t)["opacities"], 0.0).reshape(-1)
+    opacity = query(lambda t: model.render_inputs_at(t)["opacities"], 0.0).reshape(-1)
     owner = scene.body_index(mu0, 0.0, margin=EVAL_SURFACE_MARGIN)
     keep = (owner >= 0) & (opacity >= ALPHA_MIN)
     keep[keep] = _moving(scene, owner[keep])

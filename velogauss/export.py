@@ -93,7 +93,7 @@ def ply_bytes(table, sh_degree):
 
 
 def export_ply(model, t, path):
-    """Write `model.gaussians_at(t)` to `path` as a 3DGS PLY (atomically); return the Gaussian count.
+    """Write `model.render_inputs_at(t)` to `path` as a 3DGS PLY (atomically); return the Gaussian count.
 
     `t`: a finite time (normalised, |t| <= TIME_HORIZON: t > max_time is the extrapolated
     future), evaluated without gradients. Raises ValueError naming `t` for a non-finite,
@@ -101,7 +101,7 @@ def export_ply(model, t, path):
     """
     t = check_time(t)
     with torch.no_grad():  # inference: no graph of the integration steps is kept
-        g = model.gaussians_at(t)
+        g = model.render_inputs_at(t)
     table = gaussians_to_table(
         to_numpy(g["means"]), to_numpy(g["quats"]), to_numpy(g["scales"]), to_numpy(g["opacities"]).reshape(-1),
         to_numpy(g["colors"]), int(g["sh_degree"]),

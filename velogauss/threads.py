@@ -1,23 +1,21 @@
 """CPU threads of a velogauss process: how many, and how the idle ones wait.
 
 A training step runs hundreds of small torch operations and two large ones (the numba
-compositing, forward and backward). torch's CPU threads are GNU OpenMP's (libgomp): with two
-threads an iteration opens ~650 parallel regions, each ending at a barrier that waits for
-the slowest thread. Beside another CPU-bound process a region costs 129 µs instead of 14 µs
-(up to a whole scheduler time slice on a busier machine): the workers spin between regions,
-use up their scheduler credit, and are then run late when their work arrives. One torch
-thread opens no region at all (benchmarks/RESULTS.md, "Where contention comes from" and
-"Contention"). So, by default:
+compositing, forward and backward). torch's CPU threads are GNU OpenMP's (libgomp): with more
+than one, every small operation opens a parallel region that ends at a barrier, and beside
+another CPU-bound process the workers spin between regions, use up their scheduler credit and
+are run late when their work arrives. One torch thread opens no region at all (the numbers:
+benchmarks/RESULTS.md, "Where contention comes from" and "Contention"). So, by default:
 
 * torch gets **one** thread: its small operations never wait on a barrier;
 * the numba compositing kernels get one thread per core this process may use (its CPU
   affinity, capped by OMP_NUM_THREADS when that is set); they are Python threads that wait
   on a lock, and there are only two such parallel sections per step (a training step's renders
-  take one fewer while the side losses' process runs: velogauss.train.loop);
+  take one fewer while the auxiliary losses' worker runs: velogauss.train.loop);
 * OMP_WAIT_POLICY=PASSIVE (unless already set): should anything still run OpenMP with more
   threads (`--threads N`), idle workers sleep instead of spinning on a core another process
   needs. libgomp reads it once, when it loads: `prepare_environment` must run before torch
-  is imported (the `velogauss` command does it first thing).
+  is imported (the `velogauss` command's entry point, `velogauss.cli.main`, does it first).
 
 `--threads N` (config `train.threads`, 0 = the default above) gives torch and the
 compositing kernels N threads each.

@@ -203,7 +203,7 @@ def trajectories_figure(model, bounds, max_time, ground_truth=None):
     Gaussians, projected on the plane of `slice_plane(bounds)`: solid for `t ≤ max_time`,
     dashed after; `ground_truth` (an `AnalyticScene`, or None) adds the true paths in grey."""
     _, (a, b) = slice_plane(bounds)
-    opacity = query(lambda t: model.gaussians_at(t)["opacities"], 0.0).reshape(-1)
+    opacity = query(lambda t: model.render_inputs_at(t)["opacities"], 0.0).reshape(-1)
     chosen = np.sort(np.argsort(-opacity, kind="stable")[:TRAJECTORY_GAUSSIANS])
     times = np.unique(np.concatenate([np.linspace(0.0, 1.0, TRAJECTORY_TIMES), [max_time]]))
     paths = np.stack([query(model.tracked_positions, t)[chosen] for t in times])  # (T, M, 3)

@@ -194,7 +194,7 @@ EVAL_SURFACE_MARGIN = 0.05
 # has no relative error (None), as an exactly-zero one already had. Real reversal points
 # sit 10 orders of magnitude above rounding in no catalogue scene, so 1e-6 separates them.
 EVAL_VELOCITY_FLOOR = 1e-6
-# A surface point counts as seen by a camera (velogauss.bench.visibility) when the analytic
+# A surface point counts as seen by a camera (velogauss.diagnose.visibility) when the analytic
 # ray-caster's first hit along the ray to it lies no nearer than this fraction of its
 # distance: the hit at the point itself differs from that distance by the rounding of a 3x3
 # solve (about 1e-15 relative), and the nearest occluder of any catalogue surface is

@@ -75,9 +75,10 @@ PatternForm = Literal["mlp", "rigid", "harmonic"]
 PATTERN_FORMS: tuple[str, ...] = get_args(PatternForm)
 
 QueryCode = Literal["gaussians", "network"]
-# Where a material point that is not a Gaussian takes its mixing weights (spec/motion.md,
-# VG-FIELD-GAUSS): "gaussians" interpolated from its nearest Gaussians' own, "network" the
-# code network at the point (VG-CODE, VG-FIELD).
+# Where a material point that is not a Gaussian takes its velocity (spec/motion.md): "gaussians"
+# with mixing weights interpolated from its nearest Gaussians' own (VG-FIELD-GAUSS, the affine
+# velocity's), "network" from the networks at the point (the velocity MLP of no-pds). Resolved
+# from the velocity by velogauss.model.spec, not a config key.
 
 VelocityKind = Literal["affine", "mlp"]
 # How particles get a velocity: the affine basis Phi(x) w (PDS on) or an unconstrained MLP

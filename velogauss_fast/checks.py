@@ -8,8 +8,9 @@ Two checks, both raising ValueError whose message starts with the argument's nam
   wrapped tensors of `torch.func.jvp`/`vmap`.
 - `check_finite`: NaN and inf, which needs the data: one host read of a flag computed on
   the tensors' device (a device sync on CUDA). It runs only where data enters, gsplat's
-  way: `velogauss_fast.rasterize`, the model (`velogauss.model.dynamic`); the data loaders
-  check their NumPy arrays with `velogauss_core.checks`. Inner functions trust their callers.
+  way: `velogauss_fast.rasterize`, the model (`velogauss.model.velogauss_model`); the data
+  loaders check their NumPy arrays with `velogauss_core.checks`. Inner functions trust their
+  callers.
 """
 
 import torch

@@ -13,7 +13,7 @@ import numpy as onp
 from numpy.lib.stride_tricks import sliding_window_view
 
 from velogauss_core.checks import check_image_size
-from velogauss_core.windows import gaussian_window
+from velogauss_core.ssim_window import gaussian_window
 from velogauss_ref.checks import check_array
 from velogauss_core.constants import LPIPS_NORM_EPS, PSNR_MSE_FLOOR, SSIM_K1, SSIM_K2, SSIM_WINDOW
 from velogauss_core.lpips_nets import LAYERS, SCALE, SHIFT, TAPS, check_net, min_image_size, read_weights, weights_file

@@ -1,16 +1,29 @@
-"""Smoke tests of velogauss/bench: each benchmark runs end to end on its --quick workload and
-writes a well-formed section of a results file. Timings are never asserted (the machine is
-shared); only the tables' structure and the benchmarks' own correctness checks are."""
+"""Smoke tests of velogauss/bench: each benchmark runs end to end through `velogauss bench NAME`
+on its --quick workload and writes a well-formed section of a results file. Timings are never
+asserted (the machine is shared); only the tables' structure and the benchmarks' own
+correctness checks are."""
 
-import json
 import os
 import re
 
 import pytest
 import torch
+from typer.testing import CliRunner
 
 from velogauss.bench import motion, raster
 from velogauss.bench.harness import device_section, write_section
+from velogauss.cli import app
+
+# The 'before' tree of the step ratio's smoke tests: the last commit before the side losses ran
+# beside the renders.
+BEFORE = "ead8544"
+
+
+def bench(*args):
+    """`velogauss bench ARGS...` in this process; asserts it succeeded."""
+    result = CliRunner().invoke(app, ["bench", *map(str, args)])
+    assert result.exit_code == 0, result.output
+    return result
 
 
 @pytest.fixture
@@ -41,12 +54,12 @@ def table(body):
 def test_raster_bench_quick(tmp_path, one_thread):
     out = tmp_path / "RESULTS.md"
     out.write_text("# Benchmarks\n\n## Rasterizer\n\nstale\n\n## Other\n\nkeep me\n")
-    raster.main(["--quick", "--in-process", "--out", str(out), *one_thread])
+    bench("raster", "--quick", "--in-process", "--out", out, *one_thread)
     text = out.read_text()
     assert text.count("## Rasterizer") == 1 and "stale" not in text
     assert section(text, "Other").strip() == "keep me"
     body = section(text, "Rasterizer")
-    assert "Regenerate: `python -m velogauss.bench.raster --workloads quick --rounds 1 --threads 1`" in body
+    assert "Regenerate: `velogauss bench raster --workloads quick --rounds 1 --threads 1`" in body
     header, rows = table(body)
     assert header == ["workload", "method", "median fwd+bwd (s)", "time / default", "peak RSS (MiB)",
                       "peak above start (MiB)", "memory / default", "image sum", "note"]
@@ -67,9 +80,9 @@ def test_raster_bench_quick(tmp_path, one_thread):
 
 def test_motion_bench_quick(tmp_path, one_thread):
     out = tmp_path / "RESULTS.md"
-    motion.main(["--quick", "--in-process", "--out", str(out), *one_thread])
+    bench("motion", "--quick", "--in-process", "--out", out, *one_thread)
     body = section(out.read_text(), "Motion and residuals")
-    assert "Regenerate: `python -m velogauss.bench.motion --quick --threads 1`" in body
+    assert "Regenerate: `velogauss bench motion --quick --threads 1`" in body
     header, rows = table(body)
     assert header == ["case", "median (s)", "time / forward-mode", "peak memory above start (MiB)",
                       "memory / forward-mode", "note"]
@@ -87,15 +100,15 @@ def test_motion_bench_quick(tmp_path, one_thread):
     assert diff64 <= 1e-12 * scale and diff32 <= 1e-5 * scale
 
 
-@pytest.mark.parametrize("bench, argv, key", [
-    (raster, ["--worker", "dense", "quick", "--repeats", "1"], "peak_above_start_mib"),
-    (motion, ["--worker", "trajectory-fwdbwd", "--quick"], "peak_mib"),
+@pytest.mark.parametrize("measure, key", [
+    (lambda: raster.measure("dense", "quick", 1, "cpu", threads=1), "peak_above_start_mib"),
+    (lambda: motion.measure("trajectory-fwdbwd", 1, "cpu", 1, quick=True), "peak_mib"),
 ])
-def test_worker_prints_one_json_result(capsys, one_thread, bench, argv, key):
-    # What a fresh worker process prints for its parent (velogauss.bench.*._measure).
-    bench.main([*argv, *one_thread])
-    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert len(result["times"]) == 1 and result["median_s"] > 0 and key in result
+def test_a_measurement_in_a_fresh_process_returns_its_result(measure, key):
+    # The benchmark module run as a script is the fresh process: its result comes back as JSON.
+    result = measure()
+    assert "skipped" not in result, result
+    assert len(result["times"]) == 1 and result["median_s"] > 0 and key in result and result["threads"] == 1
 
 
 def test_effects_bench_quick(tmp_path):
@@ -120,9 +133,9 @@ def test_load_bench_quick(tmp_path):
     from velogauss.bench import load
 
     out = tmp_path / "RESULTS.md"
-    load.main(["--quick", "--settings", "velogauss", "--workloads", "numba", "train", "--out", str(out)])
+    bench("load", "--quick", "--settings", "velogauss", "--workloads", "numba,train", "--out", out)
     body = section(out.read_text(), "Contention")
-    assert "Regenerate: `python -m velogauss.bench.load --settings velogauss --workloads numba train --quick`" in body
+    assert "Regenerate: `velogauss bench load --settings velogauss --workloads numba,train --quick`" in body
     header, rows = table(body)
     assert header == ["setting", "workload", "idle (ms)", "beside a busy process (ms)", "beside a 2nd training (ms)",
                       "slowdown busy", "slowdown training", "threads (torch / compositing)"]
@@ -151,9 +164,9 @@ def test_step_profile_quick(tmp_path):
     from velogauss.bench import step_profile
 
     out = tmp_path / "RESULTS.md"
-    step_profile.main(["--quick", "--out", str(out)])
+    bench("step_profile", "--quick", "--out", out)
     body = section(out.read_text(), "Training step profile")
-    assert "Regenerate: `python -m velogauss.bench.step_profile --quick`" in body
+    assert "Regenerate: `velogauss bench step_profile --quick`" in body
     header, rows = table(body)
     assert header == ["part", "ms per iteration", "% of the step", "calls per iteration"]
     assert [row[0].replace("&nbsp;", "") for row in rows] == [label for label, _, _ in step_profile.PARTS]
@@ -161,22 +174,26 @@ def test_step_profile_quick(tmp_path):
     # step is one call per iteration; its parts are inside it.
     calls = {row[0].replace("&nbsp;", ""): float(row[3]) for row in rows}
     assert all(c > 0 for c in calls.values()), calls
-    assert calls["step (`_Loop.step`)"] == 1
+    assert calls["step (`Trainer.step`)"] == 1
     step_ms = float(rows[0][1])
     assert all(float(row[1]) <= step_ms for row in rows[1:] if row[0].startswith("&nbsp;"))
 
 
-def test_step_ratio_quick(tmp_path):
+def _needs_before():
     import subprocess
 
+    if subprocess.run(["git", "cat-file", "-e", f"{BEFORE}^{{commit}}"], capture_output=True).returncode:
+        pytest.skip(f"the 'before' revision {BEFORE} is not in this clone")
+
+
+def test_step_ratio_quick(tmp_path):
     from velogauss.bench import step_ratio
 
-    if subprocess.run(["git", "cat-file", "-e", f"{step_ratio.BEFORE}^{{commit}}"], capture_output=True).returncode:
-        pytest.skip(f"the 'before' revision {step_ratio.BEFORE} is not in this clone")
+    _needs_before()
     out = tmp_path / "RESULTS.md"
-    result = step_ratio.run(str(out), quick=True)
+    result = step_ratio.run(str(out), revision=BEFORE, quick=True)
     body = section(out.read_text(), "Training step: before / after")
-    assert "Regenerate: `python -m velogauss.bench.step_ratio --quick`" in body
+    assert f"Regenerate: `velogauss bench step_ratio --before {BEFORE} --quick`" in body
     header, rows = table(body)
     assert header == ["round", "before (ms per iteration)", "after (ms per iteration)", "before / after"]
     assert len(rows) == step_ratio.QUICK_ROUNDS
@@ -206,28 +223,24 @@ def test_a_cuda_run_adds_its_own_section_and_keeps_the_cpu_one(tmp_path):
 
 
 def test_step_ratio_at_a_given_size_has_its_own_section(tmp_path):
-    import subprocess
-
     from velogauss.bench import step_ratio
 
-    if subprocess.run(["git", "cat-file", "-e", f"{step_ratio.BEFORE}^{{commit}}"], capture_output=True).returncode:
-        pytest.skip(f"the 'before' revision {step_ratio.BEFORE} is not in this clone")
+    _needs_before()
     out = tmp_path / "RESULTS.md"
     write_section(out, step_ratio.SECTION, f"{step_ratio.SECTION}\n\nthe default size's numbers")
-    result = step_ratio.run(str(out), quick=True, gaussians=321)
-    # Both versions trained the point cloud's 321 Gaussians (the quick scene's own has 200).
-    assert result["gaussians"] == 321
+    bench("step_ratio", "--before", BEFORE, "--quick", "--gaussians", 321, "--out", out)
     text = out.read_text()
     assert "the default size's numbers" in text
     body = section(text, "Training step: before / after, 321 Gaussians")
+    # Both versions trained the point cloud's 321 Gaussians (the quick scene's own has 200).
     assert "with a point cloud of 321 points (321 Gaussians;" in body
-    assert "Regenerate: `python -m velogauss.bench.step_ratio --gaussians 321 --quick`" in body
+    assert f"Regenerate: `velogauss bench step_ratio --before {BEFORE} --gaussians 321 --quick`" in body
     assert len(table(body)[1]) == step_ratio.QUICK_ROUNDS
 
 
-def test_step_ratio_refuses_a_size_below_one(capsys):
-    from velogauss.bench import step_ratio
-
-    with pytest.raises(SystemExit):
-        step_ratio.main(["--gaussians", "0"])
-    assert "--gaussians: expected a positive integer, got '0'" in capsys.readouterr().err
+def test_step_ratio_needs_a_revision_and_refuses_a_size_below_one():
+    runner = CliRunner()
+    result = runner.invoke(app, ["bench", "step_ratio", "--quick"])
+    assert result.exit_code == 2 and "--before" in result.output, result.output
+    result = runner.invoke(app, ["bench", "step_ratio", "--before", BEFORE, "--gaussians", "0"])
+    assert result.exit_code == 2 and "--gaussians" in result.output, result.output

@@ -43,7 +43,7 @@ def test_writes_section_table_and_plot(quick_run):
     assert text.count("## Integrator accuracy vs time") == 1 and "stale" not in text
     assert section(text, "Other").strip() == "keep me"
     body = section(text, "Integrator accuracy vs time")
-    assert "Regenerate: `python -m velogauss.bench.accuracy --quick --threads 1`" in body
+    assert "Regenerate: `velogauss bench accuracy --quick --threads 1`" in body
     rows = [line for line in body.splitlines() if line.startswith("| ") and not line.startswith("| method")]
     assert len(rows) == len(accuracy.ORDERS) * len(accuracy.QUICK.steps)
     assert sum("(default)" in row for row in rows) == 1 and rows[0].startswith("| euler | 0.05 | 20 |")

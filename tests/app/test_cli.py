@@ -1,17 +1,21 @@
-"""Tests of velogauss/cli.py: every subcommand's help, the scene list, and bad input (exit
-code 2 and one line naming the thing). The train → eval → render → export path is run in
-tests/app/test_end_to_end.py."""
+"""Tests of velogauss/cli.py and the run-folder helpers it calls (velogauss/run.py): every
+subcommand's help, the scene list, and bad input (exit code 2 and one line naming the thing).
+The train → eval → render → export path is run in tests/app/test_end_to_end.py."""
 
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
-from velogauss.cli import app, default_run_dir, parse_background, train_flags
+from velogauss.cli import app
+from velogauss.run import default_run_dir, parse_background, train_flags
 from velogauss.scenes import SCENES
 
 runner = CliRunner()
-COMMANDS = ["make-scene", "train", "eval", "render", "export", "bench"]
+COMMANDS = ["make-scene", "train", "eval", "render", "export", "view", "sweep", "walkthrough", "bench", "diagnose"]
+BENCHMARKS = ["raster", "motion", "accuracy", "effects", "export", "viewer", "load", "step_profile", "step_ratio",
+              "fidelity"]
+DIAGNOSTICS = ["centre", "visibility"]
 
 
 def invoke(*args):
@@ -35,11 +39,20 @@ def test_top_level_help_lists_every_command():
         assert command in result.output
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("command", COMMANDS + [f"bench {b}" for b in BENCHMARKS]
+                         + [f"diagnose {d}" for d in DIAGNOSTICS])
 def test_subcommand_help(command):
-    result = invoke(command, "--help")
+    result = invoke(*command.split(), "--help")
     assert result.exit_code == 0, result.output
     assert "Usage:" in result.output
+
+
+@pytest.mark.parametrize("group, names", [("bench", BENCHMARKS), ("diagnose", DIAGNOSTICS)])
+def test_group_help_lists_every_command(group, names):
+    result = invoke(group, "--help")
+    assert result.exit_code == 0, result.output
+    for name in names:
+        assert name in result.output
 
 
 def test_make_scene_list_shows_every_scene_and_its_effects():
@@ -99,7 +112,26 @@ def test_train_missing_config_file(tmp_path):
 
 
 def test_bench_unknown_benchmark():
-    assert_bad_input(invoke("bench", "disk"), "disk")
+    result = invoke("bench", "disk")
+    assert result.exit_code == 2 and "No such command" in result.output and "disk" in result.output, result.output
+    assert "Traceback" not in result.output
+
+
+def test_bench_bad_list_names_the_option(tmp_path):
+    assert_bad_input(invoke("bench", "load", "--settings", "fast", "--out", tmp_path / "R.md"), "settings", "fast")
+    assert_bad_input(invoke("bench", "raster", "--workloads", ",", "--out", tmp_path / "R.md"), "--workloads")
+    assert not (tmp_path / "R.md").exists()
+
+
+def test_bench_on_a_device_it_does_not_measure(tmp_path):
+    assert_bad_input(invoke("bench", "step_profile", "--device", "cuda", "--out", tmp_path / "R.md"), "--device",
+                     "cuda")
+
+
+def test_diagnose_missing_run(tmp_path):
+    missing = tmp_path / "no-such-run"
+    assert_bad_input(invoke("diagnose", "centre", missing), missing)
+    assert_bad_input(invoke("diagnose", "centre", missing, "--times", "0,soon"), "--times", "soon")
 
 
 def test_flags_become_typed_config_values():

@@ -109,6 +109,11 @@ def test_round_trip_through_toml(tmp_path):
     ("train.motion_only=1", "train.motion_only"),
     ("physics.placement=near", "physics.placement"),
     ("physics.jitter=-0.1", "physics.jitter"),
+    # Values of earlier versions are refused, not read as something else.
+    ("train.adf_start=window", "train.adf_start"),
+    ("train.adf_start=-1", "train.adf_start"),
+    ("model.rigid_centre=learned", "model.rigid_centre"),
+    ("model.query_code=network", "model.query_code"),
     ("data.background=[2, 0, 0]", "data.background"),
     ("iterations=5", "SECTION.KEY"),
 ])

@@ -137,7 +137,7 @@ class VelocityModel:
             return torch.as_tensor(self.scene.position(self.mu0, t, margin=EVAL_SURFACE_MARGIN))
         return torch.as_tensor(self.mu0)
 
-    def gaussians_at(self, t):
+    def render_inputs_at(self, t):
         return {"opacities": torch.as_tensor(self.opacity)}
 
 

@@ -42,7 +42,7 @@ class TinyModel:
         self.opacities = torch.tensor([0.5, 0.9])
         self.colors = torch.arange(2 * 4 * 3, dtype=torch.float32).reshape(2, 4, 3) / 10.0
 
-    def gaussians_at(self, t):
+    def render_inputs_at(self, t):
         return {"means": self.means0 + torch.tensor([t, 0.0, 0.0]), "quats": self.quats, "scales": self.scales,
                 "opacities": self.opacities, "colors": self.colors, "sh_degree": 1}
 

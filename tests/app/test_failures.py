@@ -4,7 +4,6 @@ config, log). Every command runs in-process through the typer app on a 16-pixel 
 run of a few iterations, so the whole file takes well under a minute."""
 
 import errno
-import hashlib
 import io
 import json
 import os
@@ -22,7 +21,7 @@ from typer.testing import CliRunner
 from velogauss import io_utils
 from velogauss.cli import app
 from velogauss.train import loop
-from velogauss.train.checkpoint import FORMAT, checkpoint_path
+from velogauss.train.checkpoint import checkpoint_path, header
 from velogauss_core.constants import SSIM_WINDOW, TIME_HORIZON
 
 # Few iterations, a small model; eval and checkpoint every 2 so logs and checkpoints exist
@@ -266,7 +265,7 @@ def test_failure_before_the_first_checkpoint_leaves_no_run_folder(scene, tmp_pat
     def broken_step(self, it):
         raise RuntimeError("a bug in the first iteration")
 
-    monkeypatch.setattr(loop._Loop, "step", broken_step)
+    monkeypatch.setattr(loop.Trainer, "step", broken_step)
     result = train(scene, tmp_path / "run")
     assert isinstance(result.exception, RuntimeError)  # a bug keeps its traceback
     assert not (tmp_path / "run").exists()
@@ -304,7 +303,7 @@ def _write_payload(run, payload):
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     data = buffer.getvalue()
-    checkpoint_path(run).write_bytes(f"{FORMAT} sha256={hashlib.sha256(data).hexdigest()}\n".encode() + data)
+    checkpoint_path(run).write_bytes(header(data) + data)
 
 
 def test_flipped_checkpoint_bytes_are_caught(run):
@@ -350,7 +349,7 @@ def test_stale_checkpoint_temporaries_are_removed_on_the_next_start(run):
 
 def test_ctrl_c_prints_the_checkpoint_and_resume_logs_as_an_uninterrupted_run(scene, trained, tmp_path,
                                                                                monkeypatch):
-    step = loop._Loop.step
+    step = loop.Trainer.step
 
     def step_then_interrupt(self, it):
         out = step(self, it)
@@ -358,12 +357,12 @@ def test_ctrl_c_prints_the_checkpoint_and_resume_logs_as_an_uninterrupted_run(sc
             signal.raise_signal(signal.SIGINT)
         return out
 
-    monkeypatch.setattr(loop._Loop, "step", step_then_interrupt)
+    monkeypatch.setattr(loop.Trainer, "step", step_then_interrupt)
     cut = tmp_path / "cut"
     result = train(scene, cut)
     assert result.exit_code == 130, result.output
     assert f"training interrupted; checkpoint at iteration 3 in {cut}" in result.output
-    monkeypatch.setattr(loop._Loop, "step", step)
+    monkeypatch.setattr(loop.Trainer, "step", step)
     assert invoke("train", "--out", cut, "--resume", "--no-eval").exit_code == 0
 
     def records(run):

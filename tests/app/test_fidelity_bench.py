@@ -1,4 +1,4 @@
-"""The fidelity study (velogauss.bench.fidelity) and its diagnostic of the bodies' centres (velogauss.bench.centre)."""
+"""The fidelity study (velogauss.bench.fidelity) and its diagnostic of the bodies' centres (velogauss.diagnose.centre)."""
 
 import json
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from velogauss.bench.centre import centre_errors, centre_motion, reference_offsets
-from velogauss.bench.fidelity import acceleration_scores, pareto_front, pareto_plot, run_one
+from velogauss.diagnose.centre import centre_errors, centre_motion, reference_offsets
+from velogauss.bench.fidelity import VARIANTS, acceleration_scores, pareto_front, pareto_plot, run_one
 from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.model import build_model, scene_profile
@@ -151,25 +151,40 @@ def test_reference_offsets_measure_the_centre_off_the_spin_axis(tmp_path):
         reference_offsets(mlp, scene)
 
 
+def test_the_variants_run_the_current_defaults_and_their_ablations():
+    assert VARIANTS["a"] == [] and VARIANTS["b"] == ["model.scheme=adf-step"]
+    for ablation in ("no-gpc", "no-adf", "no-pds", "deform-only"):
+        assert [f"model.ablation={ablation}"] in VARIANTS.values()
+    for overrides in VARIANTS.values():
+        load_config(None, overrides)  # every one a valid config
+
+
 def test_a_variant_that_cannot_be_run_says_why(tmp_path):
-    """A record kept from an older tree is read from the cache but never retrained under its
-    name; an unknown variant lists the choices. Neither trains nor writes anything."""
-    with pytest.raises(ValueError, match="'a-prekernels' cannot be run: .*e6a55dd"):
-        run_one("toss", "full", "a-prekernels", 0, tmp_path)
-    with pytest.raises(ValueError, match="'a-typo' cannot be run: choose from .*a-no-gpc-mix"):
+    """A record of an earlier version's variant is read from the cache but never retrained;
+    an unknown variant lists the choices; a record under a name this version runs with other
+    overrides is refused, not passed off as its result. Nothing trains or is written."""
+    with pytest.raises(ValueError, match="'a-typo' cannot be run: choose from .*a-no-gpc"):
         run_one("toss", "full", "a-typo", 0, tmp_path)
     assert not any(tmp_path.iterdir())
-    record = {"scene": "toss", "level": "full", "variant": "a-prekernels", "seed": 0, "extrap_psnr": 36.11}
     (tmp_path / "results").mkdir()
-    (tmp_path / "results" / "toss-full-a-prekernels-s0.json").write_text(json.dumps(record))
-    assert run_one("toss", "full", "a-prekernels", 0, tmp_path) == record
+    old = {"scene": "toss", "level": "full", "variant": "a-classic", "seed": 0, "extrap_psnr": 36.11,
+           "overrides": ["model.rasterize_mode=classic"]}
+    (tmp_path / "results" / "toss-full-a-classic-s0.json").write_text(json.dumps(old))
+    assert run_one("toss", "full", "a-classic", 0, tmp_path) == old
+    renamed = {**old, "variant": "a-no-gpc", "overrides": ["model.ablation=no-gpc", "model.rasterize_mode=classic"]}
+    (tmp_path / "results" / "toss-full-a-no-gpc-s0.json").write_text(json.dumps(renamed))
+    with pytest.raises(ValueError, match="toss-full-a-no-gpc-s0.json: recorded with the overrides .*classic"):
+        run_one("toss", "full", "a-no-gpc", 0, tmp_path)
+    current = {**renamed, "overrides": ["model.ablation=no-gpc"]}
+    (tmp_path / "results" / "toss-full-a-no-gpc-s0.json").write_text(json.dumps(current))
+    assert run_one("toss", "full", "a-no-gpc", 0, tmp_path) == current
 
 
-def test_the_centre_command_reads_a_trained_run(tmp_path, capsys):
-    """`python -m velogauss.bench.centre RUN --data SCENE` on a (briefly) trained toss: one
+def test_the_centre_report_reads_a_trained_run(tmp_path):
+    """`velogauss diagnose centre RUN --data SCENE`'s report on a (briefly) trained toss: one
     line of velocity errors and one each for the spin, the two accelerations and the knots'
     offset, per body."""
-    from velogauss.bench import centre
+    from velogauss.diagnose.centre import report
     from velogauss.train import loop
 
     make_scene("toss", tmp_path / "toss", resolution=16, n_views=2, n_times=3, n_points=50, n_heldout=1)
@@ -177,8 +192,7 @@ def test_the_centre_command_reads_a_trained_run(tmp_path, capsys):
                              "train.iterations=4", "train.warmup=2", "train.curriculum=1", "physics.n_points=16",
                              "train.eval_every=0"])
     loop.train(cfg, load_scene(tmp_path / "toss"), tmp_path / "run", progress=False)
-    centre.main([str(tmp_path / "run"), "--data", str(tmp_path / "toss"), "--times", "0,1"])
-    lines = capsys.readouterr().out.splitlines()
+    lines = list(report(tmp_path / "run", tmp_path / "toss", [0.0, 1.0]))
     assert [line.split("] ")[1].split(":")[0].split("  ")[0] for line in lines] == [
         "velocity error", "spin", "acc_window", "acc_future", "rigid centre's offset from the axis through the true centre"]
     assert all(line.startswith(f"{tmp_path / 'run'} [box]") for line in lines)

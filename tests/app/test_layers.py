@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2]
 _REFERENCE_USERS = ("velogauss/walkthrough/", "velogauss/bench/")
 
 
-@pytest.mark.parametrize("module", ["velogauss.train.loop", "velogauss.cli", "velogauss.evaluate",
+@pytest.mark.parametrize("module", ["velogauss.train.loop", "velogauss.cli", "velogauss.run", "velogauss.evaluate",
                                     "velogauss_fast.raster", "velogauss_fast.metrics"])
 def test_importing_the_library_loads_neither_the_reference_nor_autograd(module):
     code = f"import sys, {module}; print(sorted(m for m in sys.modules if m.split('.')[0] in ('autograd', 'velogauss_ref')))"
@@ -46,6 +46,27 @@ def test_packages_import_only_the_layers_below(package, forbidden):
         for module in _imported_modules(path):
             if module.split(".")[0] in forbidden:
                 bad.append(f"{rel}: {module}")
+    assert not bad, bad
+
+
+def _imports_anywhere(path):
+    """Every module `path` imports, at its top level or inside functions (`from velogauss import
+    cli` counts as `velogauss.cli`)."""
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+            yield from (f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+
+
+def test_only_entry_points_import_the_command_line():
+    # velogauss.cli is the console script's module: what the commands share lives below it
+    # (velogauss.run, velogauss.errors), and no library module reaches up into it. The
+    # `python -m` entry points (`__main__.py`) are the exception: they run the command.
+    bad = [f"{path.relative_to(ROOT).as_posix()}: {module}"
+           for path in sorted((ROOT / "velogauss").rglob("*.py")) if path.name != "__main__.py"
+           for module in _imports_anywhere(path) if module == "velogauss.cli" or module.startswith("velogauss.cli.")]
     assert not bad, bad
 
 

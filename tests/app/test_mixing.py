@@ -16,7 +16,7 @@ from velogauss_core.constants import MIXING_INIT_WEIGHT
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_weights
 
-RIGID = resolve_profile(("translation", "rotation"), False)
+RIGID = resolve_profile(("translation", "rotation"), False, patterns="mlp")
 CENTRES = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.5], [0.0, 0.0, -1.0]])
 
 

@@ -5,19 +5,20 @@ import pytest
 import torch
 
 from velogauss.config import ModelConfig
-from velogauss.model.dynamic import VeloGaussModel
+from velogauss.model.velogauss_model import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
 from velogauss.model.motion import MotionParameters, gaussians_at, motion_residuals, velocity_at
 from velogauss.model.profile import resolve_profile
 from velogauss.model.spec import ABLATION_SWITCHES, resolve_motion_spec
 from velogauss_core.motion import ABLATIONS
 
-RIGID = resolve_profile(("translation", "rotation"), False)
-INCOMPRESSIBLE = resolve_profile(("translation", "rotation"), True)
-GRAVITY = resolve_profile(("translation", "gravity"), False)
-STATIC = resolve_profile(("static",), False)
+# The time network's patterns (VG-COEF) throughout, whatever the effects.
+RIGID = resolve_profile(("translation", "rotation"), False, patterns="mlp")
+INCOMPRESSIBLE = resolve_profile(("translation", "rotation"), True, patterns="mlp")
+GRAVITY = resolve_profile(("translation", "gravity"), False, patterns="mlp")
+STATIC = resolve_profile(("static",), False, patterns="mlp")
 # Uniform translation: Dv/Dt = 0, so no acceleration polynomial (velogauss.model.profile).
-DRIFT = resolve_profile(("translation",), False)
+DRIFT = resolve_profile(("translation",), False, patterns="mlp")
 SMALL = dict(n_freqs_x=1, n_freqs_adf_x=1, n_freqs_adf_t=1, code_dim=3, n_patterns=4, hidden=8, depth=1)
 
 
@@ -121,8 +122,8 @@ def test_model_rejects_motion_that_does_not_match_its_spec():
     x0, _, _ = _canonical()
     gaussians = Gaussians.from_points(x0.numpy(), None, 0, 0.1)
     with pytest.raises(ValueError, match="^motion: "):
-        VeloGaussModel(gaussians, None, _spec("full"))
-    static = VeloGaussModel(gaussians, None, _spec("full", STATIC))
+        VeloGaussModel(gaussians, None, _spec("full"), "antialiased")
+    static = VeloGaussModel(gaussians, None, _spec("full", STATIC), "antialiased")
     means, quats, _, base = static.state_at(0.7)
     assert torch.equal(means, gaussians.means) and torch.equal(base, gaussians.means)
     assert torch.equal(static.velocity_at(x0, 0.2), torch.zeros_like(x0))
@@ -135,9 +136,9 @@ def test_model_refuses_a_bad_time_where_it_enters(t):
     x0, _, _ = _canonical()
     gaussians = Gaussians.from_points(x0.numpy(), None, 0, 0.1)
     spec = _spec("full")
-    for model in (VeloGaussModel(gaussians, MotionParameters(spec, np.random.default_rng(0)), spec),
-                  VeloGaussModel(gaussians, None, _spec("full", STATIC))):
-        for call in (model.state_at, model.gaussians_at, model.tracked_positions,
+    for model in (VeloGaussModel(gaussians, MotionParameters(spec, np.random.default_rng(0)), spec, "antialiased"),
+                  VeloGaussModel(gaussians, None, _spec("full", STATIC), "antialiased")):
+        for call in (model.state_at, model.render_inputs_at, model.tracked_positions,
                      lambda t: model.velocity_at(x0, t), lambda t: model.particle_velocity(x0, x0, t)):
             with pytest.raises(ValueError, match="^t:"):
                 call(t)
@@ -147,7 +148,7 @@ def test_model_refuses_bad_points_where_they_enter():
     x0, _, _ = _canonical()
     spec = _spec("full")
     model = VeloGaussModel(Gaussians.from_points(x0.numpy(), None, 0, 0.1),
-                           MotionParameters(spec, np.random.default_rng(0)), spec)
+                           MotionParameters(spec, np.random.default_rng(0)), spec, "antialiased")
     poisoned = x0.clone()
     poisoned[3, 1] = float("nan")
     with pytest.raises(ValueError, match=r"^x: contains 1 non-finite"):
@@ -165,7 +166,7 @@ def test_model_refuses_bad_points_where_they_enter():
 
 @pytest.mark.parametrize("mode", ["classic", "antialiased"])
 def test_the_model_renders_in_its_rasterize_mode(mode):
-    # The mode travels with the Gaussians (gaussians_at's dict), so every caller of
+    # The mode travels with the Gaussians (render_inputs_at's dict), so every caller of
     # render_gaussians (training, eval, the viewer) renders as the model was trained.
     from velogauss.data.cameras import Camera, look_at
     from velogauss_fast.raster import rasterize
@@ -174,7 +175,7 @@ def test_the_model_renders_in_its_rasterize_mode(mode):
     gaussians = Gaussians.from_points(0.3 * x0.numpy(), None, 0, 0.5)
     model = VeloGaussModel(gaussians, None, _spec("full", STATIC), rasterize_mode=mode)
     camera = Camera(look_at((0.0, -3.0, 0.0), (0.0, 0.0, 0.0)), np.array([[20.0, 0, 8], [0, 20.0, 8], [0, 0, 1]]), 16, 16)
-    g = model.gaussians_at(0.0)
+    g = model.render_inputs_at(0.0)
     assert g["rasterize_mode"] == mode
     image, _, _ = model.render(camera, 0.0, torch.ones(3))
     args = [g[k] for k in ("means", "quats", "scales", "opacities", "colors")]

@@ -1,10 +1,12 @@
 """Tests of velogauss/model/profile.py: a scene's effects select what the motion model builds."""
 
 import dataclasses
+import inspect
 
 import numpy as np
 import pytest
 
+from velogauss.config import ModelConfig
 from velogauss.model.build import profile_from_dict
 from velogauss.model.profile import resolve_profile
 from velogauss.scenes import SCENES
@@ -55,7 +57,7 @@ def test_rigid_acceleration_refuses_a_deforming_scene(effects):
 ])
 def test_pattern_form_auto_is_rigid_exactly_for_rigid_motion(effects, auto):
     assert resolve_profile(effects, True, patterns="auto").pattern_form == auto
-    assert resolve_profile(effects, True).pattern_form == "mlp"  # the default of the function
+    assert resolve_profile(effects, True).pattern_form == auto  # the default, the config's
     assert resolve_profile(effects, True, patterns="mlp").pattern_form == "mlp"
     # The centre accelerates (a third knot) only under gravity.
     assert resolve_profile(effects, True, patterns="auto").rigid_knots == (3 if "gravity" in effects else 2)
@@ -79,26 +81,26 @@ def test_rigid_patterns_refuse_a_deforming_scene(effects):
         resolve_profile(effects, True, patterns="rigid")
 
 
-def test_a_profile_saved_before_the_rigid_forms_reads_as_polynomial_and_mlp():
-    # Checkpoints store dataclasses.asdict(profile); those written before acc_form and
-    # pattern_form existed lack them, and used the polynomial and the time network.
-    saved = dataclasses.asdict(resolve_profile(("rotation",), True, acceleration="rigid", patterns="rigid"))
-    del saved["acc_form"], saved["pattern_form"]
-    restored = profile_from_dict(saved)
-    assert restored.acc_form == "poly" and restored.pattern_form == "mlp"
+def test_the_keyword_defaults_are_the_configs():
+    defaults = {k: v.default for k, v in inspect.signature(resolve_profile).parameters.items()}
+    model = ModelConfig()
+    assert [defaults[k] for k in ("acceleration", "patterns", "rasterize_mode")] == [
+        model.acceleration, model.patterns, model.rasterize_mode]
+
+
+def test_a_profile_reads_back_as_it_was_saved():
+    # Checkpoints store dataclasses.asdict(profile); every field is needed to read it back.
+    profile = resolve_profile(("rotation",), True, acceleration="rigid", patterns="rigid", rasterize_mode="classic")
+    saved = dataclasses.asdict(profile)
+    assert profile_from_dict(saved) == profile
+    del saved["rasterize_mode"]
+    with pytest.raises(TypeError, match="rasterize_mode"):
+        profile_from_dict(saved)
 
 
 @pytest.mark.parametrize("mode", ["classic", "antialiased"])
 def test_the_profile_carries_the_rasterize_mode(mode):
     assert resolve_profile(("stretch",), True, rasterize_mode=mode).rasterize_mode == mode
-    assert resolve_profile(("stretch",), True).rasterize_mode == "classic"  # the default of the function
-
-
-def test_a_profile_saved_before_the_rasterize_modes_renders_classic():
-    # A checkpoint written before rasterize_mode existed was trained with the classic renderer.
-    saved = dataclasses.asdict(resolve_profile(("stretch",), True, rasterize_mode="antialiased"))
-    del saved["rasterize_mode"]
-    assert profile_from_dict(saved).rasterize_mode == "classic"
 
 
 def test_rigid_is_six_columns_affine_is_twelve():

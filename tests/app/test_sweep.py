@@ -165,7 +165,7 @@ def _sweep(grid, out, *args, **popen):
     # running beside these (pytest -n 2) may briefly fill it, which says nothing about the sweep.
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1",
            "RAY_AUTH_MODE": "disabled", "RAY_memory_monitor_refresh_ms": "0"}
-    command = [sys.executable, "-m", "velogauss.cli", "sweep", str(grid), "--out", str(out), *args]
+    command = [sys.executable, "-m", "velogauss", "sweep", str(grid), "--out", str(out), *args]
     return subprocess.Popen(command, env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, **popen)
 

@@ -9,8 +9,8 @@ import sys
 import pytest
 import torch
 
-from velogauss.cli import train_flags
 from velogauss.config import check_resume_config, load_config
+from velogauss.run import train_flags
 from velogauss.threads import apply_threads, available_cores, prepare_environment, resolve_threads
 from velogauss_fast.backends import numba_backend
 
@@ -76,9 +76,22 @@ def _fresh_interpreter(code, **env):
 
 
 def test_the_command_sets_the_wait_policy_before_torch_loads():
-    code = "import os, sys, velogauss.cli; print('torch' in sys.modules, os.environ['OMP_WAIT_POLICY'])"
-    assert _fresh_interpreter(code).split() == ["False", "PASSIVE"]
-    assert _fresh_interpreter(code, OMP_WAIT_POLICY="ACTIVE").split() == ["False", "ACTIVE"]
+    # Importing the command line sets nothing up and loads no torch; its entry point `main`
+    # sets the wait policy before the command it runs (here a stand-in for `app`) can load torch.
+    code = ("import os, sys, velogauss.cli as cli; print('torch' in sys.modules, os.environ.get('OMP_WAIT_POLICY')); "
+            "cli.app = lambda args, prog_name: print('torch' in sys.modules, os.environ['OMP_WAIT_POLICY']); cli.main()")
+    assert _fresh_interpreter(code).split() == ["False", "None", "False", "PASSIVE"]
+    assert _fresh_interpreter(code, OMP_WAIT_POLICY="ACTIVE").split() == ["False", "ACTIVE", "False", "ACTIVE"]
+
+
+def test_the_console_script_and_python_m_velogauss_run_main():
+    import tomllib
+    from pathlib import Path
+
+    pyproject = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())
+    assert pyproject["project"]["scripts"]["velogauss"] == "velogauss.cli:main"
+    result = subprocess.run([sys.executable, "-m", "velogauss", "--help"], capture_output=True, text=True, check=True)
+    assert "Usage: python -m velogauss" in result.stdout
 
 
 def test_threads_config_key_and_flag():

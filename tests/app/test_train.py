@@ -16,9 +16,10 @@ from velogauss import io_utils
 from velogauss.config import SCHEDULE, DensifyConfig, load_config, resolve_schedule, resolve_transport
 from velogauss.data import load_scene
 from velogauss.model import build_model, scene_profile
+from velogauss.model import motion as motion_fns
 from velogauss.scenes import make_scene
 from velogauss.train import loop
-from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, load_model
+from velogauss.train.checkpoint import CHECKPOINT_FORMAT, checkpoint_path, load_checkpoint, load_model
 from velogauss.train.densify import DensityStats, cap_at, densify_and_prune
 from velogauss.train.optim import make_optimizer
 from velogauss.train.sampling import FrameSampler
@@ -75,13 +76,13 @@ def test_an_opacity_reset_needs_a_period_of_training_after_it(tiny_scene, tmp_pa
     """TINY resets every 8 iterations up to 10: at 8 of 16 (8 left), not at 8 of 12 (4 left)."""
     current, resets_at = {}, []
     monkeypatch.setattr(loop, "reset_opacity", lambda model, optimizer: resets_at.append(current["done"]))
-    maintain = loop._Loop.maintain
+    adapt_gaussians = loop.Trainer.adapt_gaussians
 
     def recording(self, done):
         current["done"] = done
-        maintain(self, done)
+        adapt_gaussians(self, done)
 
-    monkeypatch.setattr(loop._Loop, "maintain", recording)
+    monkeypatch.setattr(loop.Trainer, "adapt_gaussians", recording)
     loop.train(load_config(None, TINY + [f"train.iterations={iterations}"]), tiny_scene, tmp_path, progress=False)
     assert resets_at == resets
 
@@ -258,11 +259,34 @@ def test_checkpoint_write_is_atomic(tiny_scene, tmp_path, monkeypatch):
     assert [p.name for p in checkpoint_path(tmp_path).parent.iterdir()] == ["latest.pt"]
 
 
+def test_a_checkpoint_carries_its_format_version(tiny_scene, tmp_path):
+    loop.train(load_config(None, TINY + ["train.iterations=2"]), tiny_scene, tmp_path, progress=False)
+    first, _, data = checkpoint_path(tmp_path).read_bytes().partition(b"\n")
+    assert f"format_version={CHECKPOINT_FORMAT} ".encode() in first
+    assert load_checkpoint(tmp_path)["iteration"] == 2
+    tampered = first.replace(f"format_version={CHECKPOINT_FORMAT}".encode(), b"format_version=1")
+    checkpoint_path(tmp_path).write_bytes(tampered + b"\n" + data)
+    expected = (f"{checkpoint_path(tmp_path)}: checkpoint format version 1, expected version {CHECKPOINT_FORMAT}: "
+                ".*retrain with this version, or check out the release that wrote it")
+    with pytest.raises(ValueError, match=expected):
+        load_checkpoint(tmp_path)
+    with pytest.raises(ValueError, match="version 1"):
+        load_model(tmp_path)
+    # An old-style header, with no version (velogauss-checkpoint/2 sha256=...): refused the same way.
+    digest = first.split(b"sha256=")[1]
+    checkpoint_path(tmp_path).write_bytes(b"velogauss-checkpoint/2 sha256=" + digest + b"\n" + data)
+    with pytest.raises(ValueError, match=f"checkpoint format no version, expected version {CHECKPOINT_FORMAT}: "):
+        load_checkpoint(tmp_path)
+    with pytest.raises(ValueError, match="no version"):
+        loop.train(load_config(None, TINY + ["train.iterations=4"]), tiny_scene, tmp_path, resume=True,
+                   progress=False)
+
+
 def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, monkeypatch):
     cfg = load_config(None, TINY)
     full = loop.train(cfg, tiny_scene, tmp_path / "full", progress=False)
     wall = time.perf_counter()
-    step = loop._Loop.step
+    step = loop.Trainer.step
 
     def step_then_interrupt(self, it):
         out = step(self, it)
@@ -270,15 +294,17 @@ def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, m
             signal.raise_signal(signal.SIGINT)
         return out
 
-    monkeypatch.setattr(loop._Loop, "step", step_then_interrupt)
+    monkeypatch.setattr(loop.Trainer, "step", step_then_interrupt)
     # The handler the training found is put back, whatever it was (the test process's is
     # usually Python's default, but a library loaded by an earlier test may have set another).
     handler = signal.getsignal(signal.SIGINT)
     with pytest.raises(KeyboardInterrupt, match="iteration 6"):
         loop.train(cfg, tiny_scene, tmp_path / "cut", progress=False)
-    assert load_checkpoint(tmp_path / "cut")["iteration"] == 6
+    cut = load_checkpoint(tmp_path / "cut")
+    assert cut["iteration"] == 6
+    assert loop.RunState(**cut["extra"]).elapsed_s > 0  # the run state travels in the checkpoint
     assert signal.getsignal(signal.SIGINT) is handler
-    monkeypatch.setattr(loop._Loop, "step", step)
+    monkeypatch.setattr(loop.Trainer, "step", step)
     resumed = loop.train(cfg, tiny_scene, tmp_path / "cut", resume=True, progress=False)
     # Same draws, same densification, same numbers: bit for bit on the CPU.
     a, b = full.state_dict(), resumed.state_dict()
@@ -311,19 +337,23 @@ def test_every_ablation_trains_and_reloads(tiny_scene, tmp_path, ablation):
 
 
 def test_particle_velocity_keeps_the_start_code(tiny_scene):
-    # The code network's answer between the Gaussians (VG-FIELD); "gaussians" is tested below.
-    cfg, model = _model(tiny_scene, [*MLP_PATTERNS, "model.query_code=network"])
+    # The code network's answer between the Gaussians (VG-FIELD, velogauss.model.motion's pure
+    # functions); the model's, VG-FIELD-GAUSS, is tested below.
+    cfg, model = _model(tiny_scene, MLP_PATTERNS)
     with torch.no_grad():
         last = model.motion.time[-1]
         last.copy_(torch.randn(last.shape, generator=torch.Generator().manual_seed(0)))
         x0 = torch.rand(64, 3, generator=torch.Generator().manual_seed(1)) - 0.5
         x = x0 + 0.3
+        params, spec = model.motion.params(), model.spec
         # At its own start the particle velocity is the Eulerian field (same code) ...
-        assert torch.allclose(model.particle_velocity(x0, x0, 0.4), model.velocity_at(x0, 0.4), atol=1e-6)
+        assert torch.allclose(motion_fns.particle_velocity(params, spec, x0, x0, 0.4),
+                              motion_fns.velocity_at(params, spec, x0, 0.4), atol=1e-6)
         # ... elsewhere it keeps the start's code, where the field reads the code at x.
-        moved, field = model.particle_velocity(x0, x, 0.4), model.velocity_at(x, 0.4)
+        moved = motion_fns.particle_velocity(params, spec, x0, x, 0.4)
+        field = motion_fns.velocity_at(params, spec, x, 0.4)
         assert (moved - field).abs().max() > 1e-3
-        params, cfg_m = model.motion.params(), model.spec.config
+        cfg_m = spec.config
         w = velocity_coefficients(params, 0.4, physics_code(params, x0, cfg_m), cfg_m)
         assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)
 
@@ -433,22 +463,22 @@ def _trains_and_reloads(cfg, scene, run_dir):
     return reloaded
 
 
-def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, tmp_path, monkeypatch):
+def test_aux_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, tmp_path, monkeypatch):
     # The physics, carry and mixing losses run in a worker process beside the renders
-    # (velogauss.train.side_process); their draws come first and their gradients join in a
+    # (velogauss.train.aux_worker); their draws come first and their gradients join in a
     # fixed order, so whether a worker ran changes no number of the training. With the worker,
-    # the ADF's backward runs in a thread of its own too (velogauss.model.beside), from the
-    # iteration the ADF starts: the same numbers again.
-    from velogauss.model.beside import _Job
-    from velogauss.train import side, side_process
+    # the ADF's backward runs in a thread of its own too (velogauss.train.adf_backward_thread),
+    # from the iteration the ADF starts: the same numbers again.
+    from velogauss.train import aux_losses, aux_worker
+    from velogauss.train.adf_backward_thread import AdfBackwardJob
 
     submitted, inline, adf_in = [], [], []
-    send = side_process.SideProcess.submit
-    monkeypatch.setattr(side_process.SideProcess, "submit", lambda self, *a: (submitted.append(1), send(self, *a))[1])
-    traced = side.side_loss  # in this process: the inline runs only
-    monkeypatch.setattr(side, "side_loss", lambda *a: (inline.append(1), traced(*a))[1])
-    handed = _Job.start_backward
-    monkeypatch.setattr(_Job, "start_backward", lambda self, g: (adf_in.append(1), handed(self, g))[1])
+    send = aux_worker.AuxWorker.submit
+    monkeypatch.setattr(aux_worker.AuxWorker, "submit", lambda self, *a: (submitted.append(1), send(self, *a))[1])
+    traced = aux_losses.loss_and_gradients  # in this process: the inline runs only
+    monkeypatch.setattr(aux_losses, "loss_and_gradients", lambda *a: (inline.append(1), traced(*a))[1])
+    handed = AdfBackwardJob.start_backward
+    monkeypatch.setattr(AdfBackwardJob, "start_backward", lambda self, g: (adf_in.append(1), handed(self, g))[1])
     # The default threads with a budget of two (OMP_NUM_THREADS): one torch thread, as every
     # test has, and two compositing threads, so the worker (torch's own count stays 1 here).
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
@@ -456,31 +486,31 @@ def test_side_losses_in_the_worker_train_as_inline_to_the_last_bit(tiny_scene, t
     trained = {}
     for worker in (True, False):
         trainer, _ = loop.prepare(cfg, tiny_scene, tmp_path / str(worker))
-        assert isinstance(trainer.side_worker, side_process.SideProcess)
+        assert isinstance(trainer.aux_worker, aux_worker.AuxWorker)
         if not worker:
-            trainer.side_worker = None
+            trainer.aux_worker = None
         first = max(cfg.train.warmup, trainer.adf_start - 3)  # 3 iterations without the ADF, 3 with it
         losses = [trainer.step(it) for it in range(first, first + 6)]
         trained[worker] = ({k: v.detach().clone() for k, v in trainer.model.state_dict().items()}, losses)
-    assert len(submitted) == len(inline) == 6, "the side losses ran in the worker process, then inline"
-    assert len(adf_in) == 3, "the ADF's backward ran beside on the worker's iterations with the ADF"
+    assert len(submitted) == len(inline) == 6, "the auxiliary losses ran in the worker process, then inline"
+    assert len(adf_in) == 3, "the ADF's backward ran in its thread on the worker's iterations with the ADF"
     (a, loss_a), (b, loss_b) = trained[True], trained[False]
     assert loss_a == loss_b
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
 @pytest.mark.parametrize("cores, worker, during", [(2, True, 1), (2, False, 2), (4, True, 3), (1, False, 1)])
-def test_the_renders_leave_the_side_worker_a_core(tiny_scene, tmp_path, monkeypatch, cores, worker, during):
-    # With the side losses' worker the step's compositing takes one thread fewer than the
+def test_the_renders_leave_the_aux_worker_a_core(tiny_scene, tmp_path, monkeypatch, cores, worker, during):
+    # With the auxiliary losses' worker the step's compositing takes one thread fewer than the
     # run's, at least one, and gives it back after the step.
     from velogauss_fast.backends import numba_backend
 
     monkeypatch.setenv("OMP_NUM_THREADS", str(cores))
     monkeypatch.setattr(numba_backend, "_THREADS", numba_backend._THREADS)  # prepare sets it: restored after
     trainer, _ = loop.prepare(load_config(None, TINY), tiny_scene, tmp_path)
-    assert (trainer.side_worker is not None) == (cores >= 2) and numba_backend.get_num_threads() == cores
+    assert (trainer.aux_worker is not None) == (cores >= 2) and numba_backend.get_num_threads() == cores
     if not worker:
-        trainer.side_worker = None  # (2, False): the side losses inline, as the test above runs them
+        trainer.aux_worker = None  # (2, False): the auxiliary losses inline, as the test above runs them
     seen = []
     rendered = loop.render_gaussians
     monkeypatch.setattr(loop, "render_gaussians",
@@ -493,9 +523,8 @@ def test_the_renders_leave_the_side_worker_a_core(tiny_scene, tmp_path, monkeypa
 @pytest.mark.parametrize("overrides, start", [
     ([], "window"),  # rigid patterns (toss): the patterns learn the motion before the ADF
     (["model.patterns=mlp"], "warmup"),  # the time network: the ADF starts with the motion
-    (["model.patterns=mlp", "train.adf_start=window"], "window"),
-    (["model.patterns=mlp", "train.adf_start=-1"], "window"),  # what configs before "auto" hold
     (["model.ablation=deform-only"], "warmup"),  # its ADF is the motion
+    (["model.scheme=adf-step"], "warmup"),  # its ADF carries the window
     (["model.patterns=mlp", "train.adf_start=5"], 5),
 ])
 def test_the_adf_starts_as_the_patterns_call_for(tiny_scene, tmp_path, overrides, start):
@@ -505,6 +534,6 @@ def test_the_adf_starts_as_the_patterns_call_for(tiny_scene, tmp_path, overrides
     assert trainer.spec_at(trainer.adf_start - 1).adf is False and trainer.spec_at(trainer.adf_start).adf
 
 
-def test_one_thread_computes_the_side_losses_inline(tiny_scene, tmp_path):
+def test_one_thread_computes_the_aux_losses_inline(tiny_scene, tmp_path):
     trainer, _ = loop.prepare(load_config(None, [*TINY, "train.threads=1"]), tiny_scene, tmp_path)
-    assert trainer.side_worker is None
+    assert trainer.aux_worker is None

@@ -173,7 +173,7 @@ def test_viewer_serves_rendered_frames_to_headless_chromium(tiny_scene, tmp_path
     loop.train(load_config(None, TINY + [f"data.dir=\"{tiny_scene.root}\""]), tiny_scene, run, progress=False)
     port = _free_port()
     env = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
-    viewer = subprocess.Popen([sys.executable, "-m", "velogauss.cli", "view", str(run), "--port", str(port),
+    viewer = subprocess.Popen([sys.executable, "-m", "velogauss", "view", str(run), "--port", str(port),
                                "--threads", "1", "--resolution", "128"], cwd=ROOT, env={**os.environ, **env},
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     browser = None

@@ -1,12 +1,12 @@
-"""The seen / unseen split of the velocity error (velogauss.bench.visibility)."""
+"""The seen / unseen split of the velocity error (velogauss.diagnose.visibility)."""
 
 import numpy as np
 import pytest
 import torch
 
-from velogauss.bench.visibility import seen_points, split_velocity_errors
 from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.data.dnerf import Frame
+from velogauss.diagnose.visibility import seen_points, split_velocity_errors
 from velogauss.evaluate import moving_surface_points
 from velogauss.scenes.bodies import Body, Texture
 from velogauss.scenes.motions import RigidMotion, StaticMotion

@@ -81,8 +81,9 @@ def timing_blocks(text):
 def regenerate(out):
     """Write a fresh walkthrough into `out` by `python -m velogauss.walkthrough` in a new
     interpreter, which must not have imported torch (the reference is NumPy only)."""
-    code = ("import runpy, sys; out = sys.argv[1]; sys.argv = ['walkthrough', '--out', out]; "
-            "runpy.run_module('velogauss.walkthrough', run_name='__main__'); "
+    code = ("import runpy, sys; out = sys.argv[1]; sys.argv = ['walkthrough', '--out', out]\n"
+            "try:\n    runpy.run_module('velogauss.walkthrough', run_name='__main__')\n"
+            "except SystemExit as end:\n    assert not end.code, end.code\n"
             "assert 'torch' not in sys.modules, 'the walkthrough imported torch'")
     result = subprocess.run([sys.executable, "-c", code, str(out)], cwd=ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr

@@ -212,7 +212,7 @@ def test_ssim_with_a_kept_target_is_the_five_map_convolution_to_the_last_bit(dev
     # x, y, x^2, y^2, xy in one depthwise convolution (the form before the split), bit for
     # bit, or every recorded training changes.
     from velogauss_core.constants import SSIM_K1, SSIM_K2
-    from velogauss_core.windows import gaussian_window
+    from velogauss_core.ssim_window import gaussian_window
 
     def five_maps(p, gt):
         g = torch.as_tensor(gaussian_window(), dtype=p.dtype, device=p.device)

@@ -23,11 +23,10 @@ Errors are measured in float64, so they are the integrators' own; the times are 
 float32, the training dtype (whose rounding floor is shown too). The column mask is each
 scene's effect profile (`velogauss.model.profile`): translation + rotation for both.
 
-Regenerate: python -m velogauss.bench.accuracy   (or: velogauss bench accuracy)
-Smoke test: python -m velogauss.bench.accuracy --quick --out /tmp/bench.md
+Regenerate: velogauss bench accuracy
+Smoke test: velogauss bench accuracy --quick --out /tmp/bench.md
 """
 
-import argparse
 import json
 import math
 import statistics
@@ -52,13 +51,11 @@ from velogauss_fast.motion.trajectory import base_state
 from velogauss_core.motion import COLUMN_GROUPS, init_motion_params, MotionConfig
 
 SECTION = "## Integrator accuracy vs time"
-COMMAND = "python -m velogauss.bench.accuracy"
+COMMAND = "velogauss bench accuracy"
 PLOT_NAME = "accuracy_vs_time.png"
 ORDERS = {"euler": 1, "rk2": 2, "rk4": 4}
-# The rotation-angle error of Euler converges faster under a constant spin: one Euler step
-# (1 + h Omega / 2) q is a rotation by 2 atan(h |omega| / 2) times a growth of |q|, so its
-# first-order error only scales q, which base_state's normalisation removes; the angle
-# errs by O(h^3) per step, O(h^2) in all. The other methods keep their order.
+# Euler's angle error is second order under a constant spin: its first-order error only scales
+# q, which base_state's normalisation removes.
 ANGLE_ORDERS = {**ORDERS, "euler": 2}
 T_END = 1.0
 DEFAULT = (ModelConfig.integrator, ModelConfig.step)  # what training integrates with
@@ -71,8 +68,7 @@ class Sizes(NamedTuple):
 
 
 FULL = Sizes(20_000, (0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125), 3)
-# Seconds in all: for smoke tests, not for RESULTS.md. Small enough h that every method is
-# in its asymptotic regime (|omega| h <= 0.2), so the error ratios show the orders.
+# For smoke tests: h small enough (|omega| h <= 0.2) that the error ratios show the orders.
 QUICK = Sizes(64, (0.05, 0.025, 0.0125), 1)
 
 
@@ -364,18 +360,3 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", quick=False, threads=Non
     ])
     write_section(str(out_path), SECTION, text)
     return results
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true",
-                        help=f"smoke test: {QUICK.n_particles} particles, h in {QUICK.steps}, one timed run")
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    args = parser.parse_args(argv)
-    run(args.out, args.device, quick=args.quick, threads=args.threads or None)
-
-
-if __name__ == "__main__":
-    main()

@@ -21,10 +21,9 @@ Configurations:
   (here taken from the ground truth, so the measurement does not depend on a training run);
 - static scene: a scene declaring only `static` builds no motion at all.
 
-Regenerate: python -m velogauss.bench.effects   (or: velogauss bench effects)
+Regenerate: velogauss bench effects
 """
 
-import argparse
 import statistics
 
 import numpy as np
@@ -37,7 +36,7 @@ from velogauss.model.motion import motion_residuals
 from velogauss.scenes import SCENES
 
 SECTION = "## Effect profiles: cost of motion per iteration"
-COMMAND = "python -m velogauss.bench.effects"
+COMMAND = "velogauss bench effects"
 TIMES = (0.25, 0.5, 0.75)
 N_COLLOCATION = 1024
 _HEAD_NOISE = 0.05
@@ -46,7 +45,7 @@ _HEAD_NOISE = 0.05
 def build(effects, incompressible, points, colors, seed=0):
     """A model of the default config with the given effect profile (heads perturbed)."""
     cfg = load_config()
-    profile = resolve_profile(effects, incompressible)
+    profile = resolve_profile(effects, incompressible, patterns="mlp")  # one pattern form: only the columns differ
     model = build_model(cfg, profile, points, colors, np.random.default_rng(seed))
     if model.motion is not None:
         gen = torch.Generator().manual_seed(seed)
@@ -147,19 +146,3 @@ def _write(out_path, rows, n_points, repeats, quick, threads):
         "\n".join(lines),
     ])
     write_section(out_path, SECTION, text)
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    parser.add_argument("--points", type=int, default=5000)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--quick", action="store_true", help="a tiny smoke-test configuration")
-    args = parser.parse_args(argv)
-    run(args.out, n_points=args.points, repeats=args.repeats, threads=args.threads, quick=args.quick)
-    print(f"results: {args.out}")
-
-
-if __name__ == "__main__":
-    main()

@@ -6,6 +6,8 @@ comes from the kernel's accounting of that child (`os.wait4`, ru_maxrss). For co
 "before" runs the same model the way export ran before (autograd on, every stage's
 coefficients at once) in a fresh process too. The run is a short training on the 16-pixel
 `spin` scene of issue 13, made in a temporary folder.
+
+Regenerate: velogauss bench export
 """
 
 import os
@@ -19,8 +21,7 @@ from velogauss.bench.harness import machine, write_section
 
 SECTION = "## Export: peak memory against the time exported"
 TIMES = (1.0, 10.0, 100.0)
-# What export did before issue 13: the model's parameters require gradients, every stage's
-# coefficients are computed at once, and the graph of every integration step is kept.
+# "before", the export this benchmark compares with: gradients on, every stage's coefficients at once.
 _BEFORE = """
 import sys, torch
 from velogauss.train.checkpoint import load_model
@@ -29,7 +30,7 @@ trajectory.STAGE_CHUNK = 10**9
 model, _ = load_model(sys.argv[1])
 model.requires_grad_(True)
 with torch.enable_grad():
-    g = model.gaussians_at(float(sys.argv[2]))
+    g = model.render_inputs_at(float(sys.argv[2]))
 print(g["means"].requires_grad)
 """
 
@@ -43,7 +44,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu"):
         _velogauss("make-scene", "spin", "--out", tmp / "base16", "--resolution", 16, "--views", 3, "--times", 5)
         _velogauss("train", tmp / "base16", "--out", tmp / "run", "--no-eval", "--iterations", 4)
         rows = [("after: `velogauss export RUN --time %g`" % t, t,
-                 *_measure([sys.executable, "-m", "velogauss.cli", "export", tmp / "run", "--time", t, "--out",
+                 *_measure([sys.executable, "-m", "velogauss", "export", tmp / "run", "--time", t, "--out",
                             tmp / "x.ply"])) for t in TIMES]
         rows += [("before: autograd on, all stages at once", t,
                   *_measure([sys.executable, "-c", _BEFORE, tmp / "run", t])) for t in TIMES]
@@ -63,7 +64,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu"):
 
 
 def _velogauss(*args):
-    subprocess.run([sys.executable, "-m", "velogauss.cli", *map(str, args)], check=True, capture_output=True)
+    subprocess.run([sys.executable, "-m", "velogauss", *map(str, args)], check=True, capture_output=True)
 
 
 def _measure(command):
@@ -75,7 +76,3 @@ def _measure(command):
     if os.waitstatus_to_exitcode(status) != 0:
         raise RuntimeError(f"{command}: failed: {child.stderr.read().decode()[-2000:]}")
     return usage.ru_maxrss / 1024, wall
-
-
-if __name__ == "__main__":
-    run(*sys.argv[1:2])

@@ -9,7 +9,7 @@ the interpolation / extrapolation PSNR and the freeze baseline:
   rendering) fitted to the analytic trajectories of points on the moving bodies' surfaces at
   the observed frame times (t <= max_time), by Adam on the mean squared position error. The
   positions at successive frame times come from one chained integration (VG-STEP). The
-  variant's model overrides apply (e.g. `a-mlp`: the time network), and each parameter group
+  variant's and `--set` overrides apply (e.g. `model.patterns=mlp`: the time network), and each parameter group
   is trained at its training rate relative to the networks'.
   `fit-all` fits every frame time in [0, 1] (what the basis can express at all).
 * `opt` -- the optimisation floor: training from images with the Gaussians initialised on
@@ -22,16 +22,15 @@ Every run's numbers are cached as JSON under `--cache` (default runs/fidelity), 
 tables can be rebuilt (`table`) without retraining. Results go to benchmarks/FIDELITY.md.
 
 Regenerate (one core: export OMP_NUM_THREADS=1):
-  python -m velogauss.bench.fidelity run --scenes toss,stretch --seeds 0 --levels fit,fit-all,opt,full --variants a
-  python -m velogauss.bench.fidelity run --scenes toss --seeds 0,1 --levels full --variants a,b
-  python -m velogauss.bench.fidelity table --scenes all --levels all --variants all --seeds all
-  python -m velogauss.bench.fidelity run --scenes toss --seeds 0,1 --levels full --variants cost-v1-i2000,...
-  python -m velogauss.bench.fidelity pareto   (accuracy against training time, from the cost-* runs)
-  python -m velogauss.bench.fidelity run --scenes grow@128 --levels full   (a scene at 128 x 128 px)
+  velogauss bench fidelity run --scenes toss,stretch --seeds 0 --levels fit,fit-all,opt,full --variants a
+  velogauss bench fidelity run --scenes toss --seeds 0,1 --levels full --variants a,b
+  velogauss bench fidelity table --scenes all --levels all --variants all --seeds all
+  velogauss bench fidelity run --scenes toss --seeds 0,1 --levels full --variants cost-v1-i2000,...
+  velogauss bench fidelity pareto   (accuracy against training time, from the cost-* runs)
+  velogauss bench fidelity run --scenes grow@128 --levels full   (a scene at 128 x 128 px)
 (`rescore` recomputes the motion scores of the selected trained runs from their checkpoints.)
 """
 
-import argparse
 import json
 import time
 from pathlib import Path
@@ -39,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from velogauss.config import SCHEDULE, load_config
+from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.evaluate import (MOTION_EVAL_TIMES, evaluate_split, freeze_baseline, moving_surface_points,
                                 trajectory_error, velocity_error)
@@ -54,34 +53,17 @@ from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.motion.trajectory import base_state
 
 LEVELS = ("fit", "fit-all", "opt", "full")
-# The training variants compared (config overrides). "a" and "b" are the two schemes of
-# spec/motion.md; the others change one thing each. All of them were recorded with the classic
-# renderer, the default before model.rasterize_mode became "antialiased" (FIDELITY.md,
-# section 0c), and keep it (CLASSIC below), so that a re-run reproduces its record.
-_CLASSIC_ERA = {
+# The variants that can be run: config overrides on the current defaults. "a": the defaults,
+# scheme (a) of spec/motion.md; "b": scheme (b); then the paper's ablations. Records of other
+# variants (earlier versions' defaults and probes) stay in the cache as data: each holds the
+# overrides it ran with.
+VARIANTS = {
+    "a": [],
     "b": ["model.scheme=adf-step"],
     "a-no-gpc": ["model.ablation=no-gpc"],
     "a-no-adf": ["model.ablation=no-adf"],
     "a-no-pds": ["model.ablation=no-pds"],
-    "a-fixed-means": ["train.lr_means=1e-12", "train.lr_means_final=1e-12"],
-    "b-no-gpc": ["model.scheme=adf-step", "model.ablation=no-gpc"],
-    "a-phys10": ["physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
-    "a-phys100": ["physics.lambda_transport=1e-1", "physics.lambda_div=1e-1"],
-    "a-no-transport": ["physics.lambda_transport=0"],
-    "a-transport": ["physics.lambda_transport=1e-3"],  # where "auto" turns it off (pulse)
-    "b-phys10": ["model.scheme=adf-step", "physics.lambda_transport=1e-2", "physics.lambda_div=1e-2"],
     "deform-only": ["model.ablation=deform-only"],
-    "b-carry": ["model.scheme=adf-step", "train.lambda_carry=1.0"],
-    "b-carry-near": ["model.scheme=adf-step", "train.lambda_carry=1.0", "physics.placement=gaussians"],
-    "a-near": ["physics.placement=gaussians"],
-    "a-box": ["physics.placement=box"],
-    "b-near": ["model.scheme=adf-step", "physics.placement=gaussians"],
-    "a-lr-acc": ["train.lr_acc=0.005"],
-    "a-lr-acc-hi": ["train.lr_acc=0.15"],
-    "a-budget30k": ["densify.max_gaussians=30000"],
-    "a-rigid": ["model.acceleration=rigid"],
-    "a-rigid-near": ["model.acceleration=rigid", "physics.placement=gaussians"],
-    "a-mlp": ["model.patterns=mlp"],
 }
 # Accuracy against training time (the `pareto` command): each variant changes what one run
 # costs -- views per iteration, iterations, motion patterns K, integrator -- and nothing else.
@@ -92,93 +74,7 @@ COST_VARIANTS = {
     "cost-v3-euler": ["train.views=3", "model.integrator=euler"],
     "cost-v3-rk4": ["train.views=3", "model.integrator=rk4"],
 }
-# The same lengths with the schedule of 3000 iterations (fixed counts): how these runs were made
-# before the schedule scaled with train.iterations (velogauss.config.SCHEDULE).
-COST_VARIANTS.update({f"cost-v{v}-i{i}-fixed": [f"train.views={v}", f"train.iterations={i}",
-                                                 *(f"{key}={value}" for key, value in SCHEDULE.items())]
-                      for v in (1, 3) for i in (2000, 6000)})
-_CLASSIC_ERA.update(COST_VARIANTS)
-CLASSIC = ["model.rasterize_mode=classic"]
-# With the antialiased renderer ("-aa": ablations re-run under the renderer the full model
-# uses), and the probes of multi's mixing (FIDELITY.md, section 0b).
-_ANTIALIASED_ERA = {
-    "a-no-gpc-aa": ["model.ablation=no-gpc"],
-    "deform-only-aa": ["model.ablation=deform-only"],
-    "a-curriculum2400": ["train.curriculum=2400"],
-    "a-freqs6": ["model.n_freqs_x=6"],
-    "a-freqs8": ["model.n_freqs_x=8"],
-}
-# The mixing entropy (VG-LOSS-MIX): its weight, from the uniform start, and with a finer code;
-# the physics losses' and the ADF's ablations at today's defaults (section 0); and the ADF's
-# penalty, a probe of toss's future error (section 0a).
-_MIXING_ERA = {"a-mix1e-4": ["train.lambda_mix=1e-4"], "a-mix5e-4": ["train.lambda_mix=5e-4"],
-               "a-mix3e-3": ["train.lambda_mix=3e-3"], "a-mix1e-2": ["train.lambda_mix=1e-2"],
-               "a-mix1e-3-uniform": ["train.lambda_mix=1e-3", "model.mixing_init=uniform"],
-               "a-mix1e-3-freqs6": ["train.lambda_mix=1e-3", "model.n_freqs_x=6"],
-               "a-no-gpc-mix": ["model.ablation=no-gpc"], "a-no-adf-mix": ["model.ablation=no-adf"],
-               "a-adf100": ["train.lambda_adf=100"], "a-adf1000": ["train.lambda_adf=1000"]}
-# The variants of _CLASSIC_ERA and _ANTIALIASED_ERA were recorded before model.mixing_init =
-# "auto" started multi's patterns apart (section 0b) and keep the uniform start, so that a re-run
-# reproduces its record (on the other scenes "auto" is the uniform start: nothing changes there).
-UNIFORM = ["model.mixing_init=uniform"]
-# Every variant but those of _MIXING_ERA was recorded before train.lambda_mix became 1e-3
-# (section 0) and keeps it off.
-NOMIX = ["train.lambda_mix=0"]
-# Every variant of _BEFORE_ANCHORING was recorded before model.rigid_centre = "auto" anchored
-# the rigid patterns' centre of a body in free flight (toss, section 0a) and keeps it learned
-# (on the other scenes "auto" is "learned": nothing changes there).
-LEARNED = ["model.rigid_centre=learned"]
-# "a-learned", "a-nomix", "a-uniform" and "a-classic": the defaults of the four versions
-# before "a-nocool".
-_BEFORE_ANCHORING = {"a-learned": [], "a-nomix": NOMIX, "a-uniform": [*UNIFORM, *NOMIX],
-                     "a-clusters": ["model.mixing_init=clusters", *NOMIX], "a-classic": [*CLASSIC, *UNIFORM, *NOMIX],
-                     **_MIXING_ERA,
-                     **{name: [*changes, *UNIFORM, *NOMIX] for name, changes in _ANTIALIASED_ERA.items()},
-                     **{name: [*changes, *CLASSIC, *UNIFORM, *NOMIX] for name, changes in _CLASSIC_ERA.items()}}
-# "a": today's defaults. "a-nocool": those of the version before the acceleration group's
-# cooldown (train.acc_cooldown, section 0d); "a-lracc5e-4": that version with the group's rate
-# decayed 100x over the whole schedule, not 10x; "a-hull": that version with the centre
-# anchored where "auto" leaves it learned (spin); "a-no-gpc-k" and "deform-only-k": its
-# ablations ("-k": trained with the compiled kernels).
-_BEFORE_COOLDOWN = {"a-nocool": [], "a-lracc5e-4": ["train.lr_acc_final=5e-4"], "a-hull": ["model.rigid_centre=hull"],
-                    "a-no-gpc-k": ["model.ablation=no-gpc"], "deform-only-k": ["model.ablation=deform-only"],
-                    **{name: [*changes, *LEARNED] for name, changes in _BEFORE_ANCHORING.items()}}
-# The variants of _BEFORE_COOLDOWN were recorded before the cooldown and keep it off (deform-only has no
-# acceleration group: nothing changes there).
-NOCOOL = ["train.acc_cooldown=0"]
-# "a-netq": the version before the velocity between the Gaussians (VG-FIELD-GAUSS, section
-# 0e): the same training, the code network's velocity at the evaluation's points;
-# "a-no-gpc-c": its physics losses' ablation.
-_BEFORE_QUERY = {"a-netq": [], "a-no-gpc-c": ["model.ablation=no-gpc"],
-                 **{name: [*changes, *NOCOOL] for name, changes in _BEFORE_COOLDOWN.items()}}
-# Every variant below but "a" and the "-dens4e-4" probes was recorded with the code network's
-# velocity between the Gaussians.
-NETQ = ["model.query_code=network"]
-# "-dens4e-4": this version with the densification's gradient threshold at 4e-4 (5e-4 by
-# default), the full model and the deformation-only one (section 0e, "stretch").
-DENS4 = ["densify.grad_threshold=0.0004"]
-# "-dens4e-4-ramp": 4e-4 with the cap rising over the densification window.
-RAMP = [*DENS4, "densify.cap_schedule=linear"]
-# "a-window": the version before the ADF started with the motion under the time network's
-# patterns (train.adf_start = "auto", section 0f), on stretch, shear and grow the "a" records
-# of that version (on the other scenes "auto" is "window": nothing changes there).
-_BEFORE_ADF_RULE = {"a-window": [], "a-dens4e-4": DENS4, "deform-only-dens4e-4": ["model.ablation=deform-only", *DENS4],
-                    "a-dens4e-4-ramp": RAMP, "deform-only-dens4e-4-ramp": ["model.ablation=deform-only", *RAMP],
-                    **{name: [*changes, *NETQ] for name, changes in _BEFORE_QUERY.items()}}
-# Every variant of _BEFORE_ADF_RULE keeps that rule.
-ADF_WINDOW = ["train.adf_start=window"]
-# "a-adf200": the ADF learning from the warm-up's end (iteration 200), as deform-only's does,
-# instead of once the curriculum has opened the window (stretch's miss, section 0f);
-# "a-no-gpc-f": the physics losses' ablation at this version.
-VARIANTS = {"a": [], "a-adf200": ["train.adf_start=200"], "a-no-gpc-f": ["model.ablation=no-gpc"],
-            **{name: [*changes, *ADF_WINDOW] for name, changes in _BEFORE_ADF_RULE.items()}}
-# Records no variant of this tree re-runs: the defaults as trained at commit e6a55dd, before
-# the numba backend's compiled preparation and photometric loss. The kernels changed every
-# training's rounding, which moves toss's extrapolation by several dB either way (FIDELITY.md,
-# section 0a); the same config now trains as "a-learned". Every variant recorded before them
-# keeps its name, and a re-run of one gives this version's rounding.
-RECORDED_ONLY = {"a-prekernels": "the defaults before the compiled kernels (commit e6a55dd); "
-                                 "re-run \"a-learned\" instead"}
+VARIANTS.update(COST_VARIANTS)
 DEFAULT_COST = "cost-v3-i3000"
 OPT_FLOOR = ["train.motion_only=true", "densify.until=0", "densify.opacity_reset_every=0"]
 # The representational fit: points on the moving surfaces (a seed other than the
@@ -309,12 +205,16 @@ def run_one(name, level, variant, seed, cache, extra=()):
     """Run (or read from the cache) one (scene, level, variant, seed); returns its record."""
     tag = f"{name}-{level}-{variant}-s{seed}"
     file = Path(cache) / "results" / f"{tag}.json"
+    overrides = [*VARIANTS[variant], *extra] if variant in VARIANTS else None
     if file.is_file():
-        return json.loads(file.read_text())
-    if variant not in VARIANTS:
-        why = RECORDED_ONLY.get(variant, f"choose from {', '.join(sorted(VARIANTS))}")
-        raise ValueError(f"--variants: {variant!r} cannot be run: {why}")
-    overrides = [*VARIANTS[variant], *extra]
+        record = json.loads(file.read_text())
+        # A record of another version under a name this one runs differently is not its result.
+        if overrides is not None and record.get("overrides") != overrides:
+            raise ValueError(f"{file}: recorded with the overrides {record.get('overrides')}, and {variant!r} now "
+                             f"runs {overrides}; choose another --cache (the record stays as data)")
+        return record
+    if overrides is None:
+        raise ValueError(f"--variants: {variant!r} cannot be run: choose from {', '.join(sorted(VARIANTS))}")
     if level in ("fit", "fit-all"):
         scores = fit_level(name, seed, overrides, all_times=level == "fit-all")
     else:
@@ -427,45 +327,32 @@ def load_records(cache):
     return [json.loads(p.read_text()) for p in sorted((Path(cache) / "results").glob("*.json"))]
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog="python -m velogauss.bench.fidelity", description=__doc__.split("\n")[0])
-    parser.add_argument("command", choices=("run", "table", "rescore", "pareto"))
-    parser.add_argument("--scenes", default="toss")
-    parser.add_argument("--seeds", default="0")
-    parser.add_argument("--levels", default="full")
-    parser.add_argument("--variants", default="a")
-    parser.add_argument("--set", action="append", default=[], help="extra config override KEY=VALUE")
-    parser.add_argument("--cache", default="runs/fidelity")
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--plot", default="benchmarks/fidelity/pareto.png", help="where `pareto` writes its PNG")
-    args = parser.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    if args.command == "run":
-        for name in args.scenes.split(","):
-            for level in args.levels.split(","):
-                for variant in args.variants.split(","):
-                    for seed in (int(s) for s in args.seeds.split(",")):
-                        record = run_one(name, level, variant, seed, args.cache, args.set)
+def study(action, scenes="toss", seeds="0", levels="full", variants="a", overrides=(), cache="runs/fidelity",
+          threads=1, plot="benchmarks/fidelity/pareto.png"):
+    """`velogauss bench fidelity ACTION`: "run" trains and scores every selected run (scenes,
+    seeds, levels, variants: comma-separated) and prints the table; "table" prints it from the
+    cache; "rescore" recomputes the motion scores from the checkpoints; "pareto" plots accuracy
+    against training time into `plot`. `overrides`: extra config KEY=VALUE for every run."""
+    torch.set_num_threads(threads)
+    selection = {"scene": scenes, "level": levels, "variant": variants, "seed": seeds}
+    if action == "run":
+        for name in scenes.split(","):
+            for level in levels.split(","):
+                for variant in variants.split(","):
+                    for seed in (int(s) for s in seeds.split(",")):
+                        record = run_one(name, level, variant, seed, cache, list(overrides))
                         print(json.dumps({k: record.get(k) for k in ("scene", "level", "variant", "seed",
                                                                       *(c[0] for c in COLUMNS))}), flush=True)
-    records = [r for r in load_records(args.cache) if _selected(r, args)]
-    if args.command == "rescore":
-        records = [rescore(r, args.cache) for r in records]
-    if args.command == "pareto":
-        print(pareto_plot(load_records(args.cache), args.plot, args.scenes.split(",")[0]))
+    records = [r for r in load_records(cache) if action == "run" or _selected(r, selection)]
+    if action == "rescore":
+        records = [rescore(r, cache) for r in records]
+    if action == "pareto":
+        print(pareto_plot(load_records(cache), plot, scenes.split(",")[0]))
         return
     print(table(records))
 
 
-def _selected(record, args):
-    """Whether a cached record is in the --scenes / --levels / --variants / --seeds selection
-    of a `table` command ("all" selects everything)."""
-    if args.command == "run":
-        return True
-    return all(value == "all" or str(record[key]) in value.split(",")
-               for key, value in (("scene", args.scenes), ("level", args.levels), ("variant", args.variants),
-                                  ("seed", args.seeds)))
-
-
-if __name__ == "__main__":
-    main()
+def _selected(record, selection):
+    """Whether a cached record is in the `selection` {"scene", "level", "variant", "seed": comma-separated
+    values, or "all"}."""
+    return all(value == "all" or str(record[key]) in value.split(",") for key, value in selection.items())

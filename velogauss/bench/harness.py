@@ -35,8 +35,7 @@ def reset_peak_memory(device):
     """Start a peak-memory measurement; returns the baseline (resident KiB, CUDA bytes).
 
     Memory freed since the warm-up stays resident in glibc's heap unless trimmed: timed
-    passes would reuse it without raising VmHWM and report a peak near 0 (observed: 0.25
-    MiB instead of 11 MiB for the fast rasterizer on W1).
+    passes would reuse it without raising VmHWM and report a peak near 0.
     """
     malloc_trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # glibc only
     if malloc_trim is not None:

@@ -2,7 +2,7 @@
 
 For each thread setting, a fresh worker process times, one after the other:
 
-* `train`: iterations (`_Loop.step` + `maintain`) of the default training on the default
+* `train`: iterations (`Trainer.step` + `adapt_gaussians`) of the default training on the default
   scene (`velogauss make-scene`'s defaults), from iteration warmup + curriculum on: motion,
   ADF and the full physics loss are on, the model is the one training starts from;
 * `numba`, `torch`: forward + backward of the rasterizer benchmark's W2 render (128 x 128,
@@ -21,14 +21,12 @@ before (torch's and the compositing kernels' threads = the cores, libgomp's defa
 policy); `passive` is torch-default with OMP_WAIT_POLICY=PASSIVE; `one-thread` is
 `--threads 1`. Workers start without the caller's OMP_*/MKL_*/NUMBA_* thread variables.
 
-Regenerate: python -m velogauss.bench.load   (or: velogauss bench load)
-Smoke test: python -m velogauss.bench.load --quick --out /tmp/bench.md
+Regenerate: velogauss bench load
+Smoke test: velogauss bench load --quick --out /tmp/bench.md
 """
 
-import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -38,7 +36,7 @@ from pathlib import Path
 from velogauss.threads import available_cores
 
 SECTION = "## Contention"
-COMMAND = "python -m velogauss.bench.load"
+COMMAND = "velogauss bench load"
 WORKLOADS = ("train", "numba", "torch")
 CONDITIONS = ("idle", "busy", "training")
 # name: (OMP_WAIT_POLICY in the worker's environment or None, train.threads; None: the cores)
@@ -55,8 +53,7 @@ _BUSY_LOOP = "while True: pass"
 _WARMUP_PASSES = 2
 _MIN_PASSES = 3
 _READY = "ready"
-# Wall seconds per measurement: at 0.1 s a training iteration, 80 of them (a densification
-# every 100 iterations stays out of the window).
+# Wall seconds per measurement: short enough that no densification (every 100 iterations) falls inside.
 DEFAULT_SECONDS = 8.0
 QUICK_SECONDS = 0.2
 
@@ -80,7 +77,7 @@ def setting_threads(setting):
 # --- the worker (a fresh process per setting and condition) ------------------------------
 
 def training_loop(scene_dir, threads):
-    """The `_Loop` of the default config on `scene_dir` (velogauss.train.loop.prepare) and the
+    """The `Trainer` of the default config on `scene_dir` (velogauss.train.loop.prepare) and the
     first iteration the benchmarks time: warmup + curriculum, with motion, ADF and the full
     physics loss on."""
     from velogauss.config import load_config
@@ -102,7 +99,7 @@ def training_pass(scene_dir, threads):
     def one_pass():
         loop.step(counter["it"])
         counter["it"] += 1
-        loop.maintain(counter["it"])
+        loop.adapt_gaussians(counter["it"])
 
     return one_pass, len(loop.model.gaussians)
 
@@ -181,8 +178,9 @@ def _start_competitor(condition, setting, scene_dir):
         return None
     if condition == "busy":
         return subprocess.Popen([sys.executable, "-c", _BUSY_LOOP], env=worker_env(setting))
-    proc = subprocess.Popen([sys.executable, "-m", "velogauss.bench.load", "--competitor", setting,
-                             "--scene", str(scene_dir)], env=worker_env(setting), stdout=subprocess.PIPE, text=True)
+    arguments = {"setting": setting, "scene_dir": str(scene_dir)}
+    proc = subprocess.Popen([sys.executable, "-m", "velogauss.bench.load", "competitor", json.dumps(arguments)],
+                            env=worker_env(setting), stdout=subprocess.PIPE, text=True)
     if proc.stdout.readline().strip() != _READY:
         proc.kill()
         raise RuntimeError(f"the competing training ({setting}) did not start: exit code {proc.wait()}")
@@ -199,9 +197,10 @@ def _measure(setting, condition, workloads, seconds, scene_dir, quick):
     """One worker process of `setting` timing `workloads` under `condition`."""
     competitor = _start_competitor(condition, setting, scene_dir)
     try:
-        cmd = [sys.executable, "-m", "velogauss.bench.load", "--worker", setting, "--workloads", *workloads,
-               "--seconds", str(seconds), "--scene", str(scene_dir)] + (["--quick"] if quick else [])
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=worker_env(setting))
+        arguments = {"setting": setting, "workloads": list(workloads), "seconds": seconds, "scene_dir": str(scene_dir),
+                     "quick": quick}
+        proc = subprocess.run([sys.executable, "-m", "velogauss.bench.load", "worker", json.dumps(arguments)],
+                              capture_output=True, text=True, env=worker_env(setting))
     finally:
         _stop(competitor)
     if proc.returncode != 0:
@@ -251,9 +250,9 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", settings=DEFAULT_SETTING
 
     options = []
     if tuple(settings) != DEFAULT_SETTINGS:
-        options.append("--settings " + " ".join(settings))
+        options.append("--settings " + ",".join(settings))
     if tuple(workloads) != WORKLOADS:
-        options.append("--workloads " + " ".join(workloads))
+        options.append("--workloads " + ",".join(workloads))
     if seconds != default_seconds:
         options.append(f"--seconds {seconds:g}")
     text = "\n\n".join([
@@ -290,29 +289,9 @@ def _table(measured, settings, workloads):
     return "\n".join(lines)
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--worker", metavar="SETTING", help=argparse.SUPPRESS)
-    parser.add_argument("--competitor", metavar="SETTING", help=argparse.SUPPRESS)
-    parser.add_argument("--scene", help=argparse.SUPPRESS)
-    parser.add_argument("--settings", nargs="+", default=list(DEFAULT_SETTINGS),
-                        help=f"some of {', '.join(SETTINGS)} (default: {' '.join(DEFAULT_SETTINGS)})")
-    parser.add_argument("--workloads", nargs="+", default=list(WORKLOADS), help=f"some of {', '.join(WORKLOADS)}")
-    parser.add_argument("--seconds", type=float, default=None,
-                        help=f"wall time of each measurement (default {DEFAULT_SECONDS:g}, --quick {QUICK_SECONDS:g})")
-    parser.add_argument("--quick", action="store_true",
-                        help="smoke test: a 16 px scene, the 12 x 12 render, short measurements")
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    args = parser.parse_args(argv)
-    if args.worker:
-        print(json.dumps(_worker(args.worker, args.workloads, args.seconds, args.scene, args.quick)))
-        return
-    if args.competitor:
-        _competitor_training(args.competitor, args.scene)
-        return
-    run(args.out, settings=tuple(args.settings), workloads=tuple(args.workloads), seconds=args.seconds,
-        quick=args.quick)
-
-
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # `_measure`'s worker or `_start_competitor`'s training: role, then arguments as JSON
+    role, arguments = sys.argv[1], json.loads(sys.argv[2])
+    if role == "competitor":
+        _competitor_training(**arguments)
+    else:
+        print(json.dumps(_worker(**arguments)))

@@ -20,11 +20,10 @@ above the allocation at the reset).
 Parameters: `init_motion_params(default_rng(0), MotionConfig())` (the default sizes) plus
 N(0, 0.1^2) on every entry (`_params`): a fresh model does not move.
 
-Regenerate: python -m velogauss.bench.motion   (or: velogauss bench motion)
-Smoke test: python -m velogauss.bench.motion --quick --in-process --out /tmp/bench.md
+Regenerate: velogauss bench motion
+Smoke test: velogauss bench motion --quick --in-process --out /tmp/bench.md
 """
 
-import argparse
 import json
 import math
 import statistics
@@ -47,7 +46,7 @@ from velogauss_fast.physics.residuals import physics_residuals
 from velogauss_core.motion import init_motion_params, MotionConfig
 
 SECTION = "## Motion and residuals"
-COMMAND = "python -m velogauss.bench.motion"
+COMMAND = "velogauss bench motion"
 CASES = ("trajectory-fwd", "trajectory-fwdbwd", "residuals-jvp-fwd", "residuals-jvp-fwdbwd",
          "residuals-jacrev-fwd", "residuals-jacrev-fwdbwd")
 T_END = 0.75
@@ -61,7 +60,7 @@ class Sizes(NamedTuple):
 
 
 FULL = Sizes(100_000, 30, 65_536)
-# Seconds for every case: for smoke tests, not for RESULTS.md.
+# For smoke tests: seconds for every case.
 QUICK = Sizes(256, 2, 64)
 
 
@@ -172,11 +171,11 @@ def _workload(case, device, sizes):
     return step
 
 
-def _worker(case, repeats, device, threads, sizes):
+def _worker(case, repeats, device, threads, quick):
     """Time `repeats` passes of one case in this (fresh) process."""
     if threads:
         torch.set_num_threads(threads)
-    step = _workload(case, device, sizes)
+    step = _workload(case, device, QUICK if quick else FULL)
     step()  # warm-up: allocator pools, lazy imports, one-time kernels
     baseline = reset_peak_memory(device)
     times = timed_passes(step, repeats)
@@ -184,13 +183,14 @@ def _worker(case, repeats, device, threads, sizes):
             "peak_mib": peak_above_mib(device, baseline), "threads": torch.get_num_threads()}
 
 
-def _measure(case, repeats, device, threads, quick=False, in_process=False):
-    """Run one case in a fresh interpreter (or in this one); returns its result dict."""
+def measure(case, repeats, device, threads, quick=False, in_process=False):
+    """Time one case in a fresh interpreter (this module run as a script) or in this one;
+    returns its result dict, or {"case", "skipped": why} when the fresh interpreter failed."""
     if in_process:
-        return _worker(case, repeats, device, threads, QUICK if quick else FULL)
-    cmd = [sys.executable, "-m", "velogauss.bench.motion", "--worker", case, "--repeats", str(repeats),
-           "--device", device, "--threads", str(threads or 0)] + (["--quick"] if quick else [])
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+        return _worker(case, repeats, device, threads, quick)
+    arguments = {"case": case, "repeats": repeats, "device": device, "threads": threads or 0, "quick": quick}
+    proc = subprocess.run([sys.executable, "-m", "velogauss.bench.motion", json.dumps(arguments)],
+                          capture_output=True, text=True)
     if proc.returncode != 0:
         tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
         return {"case": case, "skipped": f"failed: {tail[:160]}"}
@@ -233,7 +233,7 @@ def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo
     sizes = QUICK if quick else FULL
     results = {}
     for case in CASES:
-        results[case] = _measure(case, repeats, device, threads, quick, in_process)
+        results[case] = measure(case, repeats, device, threads, quick, in_process)
         echo(json.dumps({k: v for k, v in results[case].items() if k != "times"}))
     diff32, r32, d32 = residual_difference(device, torch.float32, sizes.n_points)
     diff64, _, _ = residual_difference(device, torch.float64, sizes.n_points)
@@ -272,25 +272,5 @@ def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo
     return results
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--worker", metavar="CASE", choices=CASES, help=argparse.SUPPRESS)
-    parser.add_argument("--repeats", type=int, default=None, help="timed passes per case (default 5; 1 with --quick)")
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"smoke test: {QUICK.n_particles} particles, {QUICK.n_steps} steps, "
-                             f"{QUICK.n_points} points")
-    parser.add_argument("--in-process", action="store_true",
-                        help="measure in this process, not one fresh process per case")
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    args = parser.parse_args(argv)
-    repeats = args.repeats or (1 if args.quick else 5)
-    if args.worker:
-        print(json.dumps(_worker(args.worker, repeats, args.device, args.threads, QUICK if args.quick else FULL)))
-        return
-    run(args.out, args.device, repeats, args.threads or None, quick=args.quick, in_process=args.in_process)
-
-
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # `measure`'s fresh interpreter: `_worker`'s arguments in, its result out, as JSON
+    print(json.dumps(_worker(**json.loads(sys.argv[1]))))

@@ -28,11 +28,10 @@ renders in float64), so a fast but wrong method shows. --threads sets torch's CP
 in the workers: on a machine with busy cores, give no more than the idle ones (torch's
 spinning workers otherwise slow every pass down many times over).
 
-Regenerate: python -m velogauss.bench.raster   (or: velogauss bench raster)
-Smoke test: python -m velogauss.bench.raster --quick --in-process --out /tmp/bench.md
+Regenerate: velogauss bench raster
+Smoke test: velogauss bench raster --quick --in-process --out /tmp/bench.md
 """
 
-import argparse
 import json
 import math
 import statistics
@@ -48,7 +47,7 @@ from velogauss_fast.backends import gsplat_available
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 
 SECTION = "## Rasterizer"
-COMMAND = "python -m velogauss.bench.raster"
+COMMAND = "velogauss bench raster"
 
 
 @dataclass(frozen=True)
@@ -64,18 +63,15 @@ WORKLOADS = {
     "W2": Workload("W2", 128, 128, 10_000),
     "W3": Workload("W3", 256, 256, 50_000),
     "W4": Workload("W4", 400, 400, 100_000),
-    # Seconds for every method, the reference included: for smoke tests, not for RESULTS.md.
+    # For smoke tests: seconds for every method, the reference included.
     "quick": Workload("quick", 12, 12, 24),
 }
 DEFAULT_WORKLOADS = ("W1", "W2", "W3", "W4")
 METHODS = ("numba", "torch", "gsplat", "autograd", "dense", "reference")
 # The per-pixel NumPy reference is far too slow beyond the smallest workload.
 REFERENCE_WORKLOADS = ("W1", "quick")
-# Peak bytes per (pixel, Gaussian) element of the dense renderer's forward + backward
-# (float32 tensors of shape (P, N) kept for backward plus the backward's own temporaries):
-# 993 MiB over W1's 4096 x 2000 elements, with freed heap memory trimmed before the
-# measurement (without, 562 MiB). A dense run is skipped when P * N times this exceeds
-# the memory limit.
+# Peak bytes per (pixel, Gaussian) element of the dense renderer's forward + backward, as
+# measured on W1: a dense run whose P * N elements need more than the memory limit is skipped.
 DENSE_BYTES_PER_ELEMENT = 128
 
 
@@ -204,10 +200,9 @@ def _reference_renderer():
 def _worker(method, workload, repeats, device, threads=0):
     """Time `repeats` forward+backward passes of one method in this (fresh) process.
 
-    threads: torch CPU threads (0: torch's default, one per core). On a machine whose
-    cores are busy with other work, more threads than free cores make torch's OpenMP
-    workers spin against each other: passes ran 40x slower with 2 threads than with 1 on
-    a loaded 2-core machine.
+    threads: torch CPU threads (0: torch's default, one per core); on a machine whose cores
+    are busy, give no more than the free ones, since torch's OpenMP workers spin against
+    each other.
     """
     if threads:
         torch.set_num_threads(threads)
@@ -265,13 +260,15 @@ def _skip_reason(method, workload, memory_limit_gib, device="cpu"):
     return None
 
 
-def _measure(method, workload, repeats, device, threads=0, in_process=False):
-    """Run one (method, workload) in a fresh interpreter (or in this one); returns its result dict."""
+def measure(method, workload, repeats, device, threads=0, in_process=False):
+    """Time one (method, workload) in a fresh interpreter (this module run as a script) or in
+    this one; returns its result dict, or {"method", "workload", "skipped": why} when the
+    fresh interpreter failed."""
     if in_process:
         return _worker(method, workload, repeats, device, threads)
-    cmd = [sys.executable, "-m", "velogauss.bench.raster", "--worker", method, workload,
-           "--repeats", str(repeats), "--device", device, "--threads", str(threads)]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    arguments = {"method": method, "workload": workload, "repeats": repeats, "device": device, "threads": threads}
+    proc = subprocess.run([sys.executable, "-m", "velogauss.bench.raster", json.dumps(arguments)],
+                          capture_output=True, text=True)
     if proc.returncode != 0:
         tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
         return {"method": method, "workload": workload, "skipped": f"failed: {tail[:120]}"}
@@ -313,9 +310,9 @@ def _command(workloads, methods, device, threads, rounds=3):
     """The command line that regenerates a table of these workloads, methods, device, threads and rounds."""
     options = []
     if tuple(workloads) != DEFAULT_WORKLOADS:
-        options.append("--workloads " + " ".join(workloads))
+        options.append("--workloads " + ",".join(workloads))
     if tuple(methods) != METHODS:
-        options.append("--methods " + " ".join(methods))
+        options.append("--methods " + ",".join(methods))
     if rounds != 3:
         options.append(f"--rounds {rounds}")
     return regenerate_command(COMMAND, *options, device=device, threads=threads)
@@ -375,7 +372,7 @@ def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=M
             for m in methods:
                 if skipped[m] is not None or (k > 0 and m in SINGLE_ROUND):
                     continue
-                r = _measure(m, w, repeats or _repeats(m, w), device, threads, in_process)
+                r = measure(m, w, repeats or _repeats(m, w), device, threads, in_process)
                 if "skipped" in r:
                     skipped[m] = r["skipped"]
                     continue
@@ -408,32 +405,5 @@ def run(out_path="benchmarks/RESULTS.md", workloads=DEFAULT_WORKLOADS, methods=M
     return results
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--worker", nargs=2, metavar=("METHOD", "WORKLOAD"), help=argparse.SUPPRESS)
-    parser.add_argument("--workloads", nargs="+", default=list(DEFAULT_WORKLOADS),
-                        help=f"some of {', '.join(WORKLOADS)} (default: {' '.join(DEFAULT_WORKLOADS)})")
-    parser.add_argument("--quick", action="store_true",
-                        help="smoke test: the 12 x 12, 24-Gaussian workload, one timed pass")
-    parser.add_argument("--in-process", action="store_true",
-                        help="measure in this process, not one fresh process per measurement")
-    parser.add_argument("--methods", nargs="+", default=list(METHODS))
-    parser.add_argument("--repeats", type=int, default=None, help="timed passes per process")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds of one process per method")
-    parser.add_argument("--memory-limit-gib", type=float, default=24.0)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    args = parser.parse_args(argv)
-    if args.worker:
-        print(json.dumps(_worker(*args.worker, args.repeats or 3, args.device, args.threads)))
-        return
-    workloads = ("quick",) if args.quick else tuple(args.workloads)
-    repeats = args.repeats or (1 if args.quick else None)
-    rounds = 1 if args.quick else args.rounds
-    run(args.out, workloads, tuple(args.methods), repeats, args.memory_limit_gib, args.device,
-        threads=args.threads, in_process=args.in_process, rounds=rounds)
-
-
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # `measure`'s fresh interpreter: `_worker`'s arguments in, its result out, as JSON
+    print(json.dumps(_worker(**json.loads(sys.argv[1]))))

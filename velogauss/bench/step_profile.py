@@ -6,15 +6,14 @@ velogauss's default threads), run under cProfile; each row is the cumulative tim
 functions that do one part of the step, per iteration. Rows nest where their functions do
 (compositing forward runs inside the render; compositing backward inside backward); the
 indented rows are parts of the row above. cProfile sees only its own thread, so the side
-losses (velogauss.train.side) run inline in the profiled iterations, as on one core; the
+losses (velogauss.train.aux_losses) run inline in the profiled iterations, as on one core; the
 iteration times are reported unprofiled with them beside the renders (the default), unprofiled
 inline, and profiled. cProfile's own cost inflates Python-heavy parts.
 
-Regenerate: python -m velogauss.bench.step_profile   (or: velogauss bench step_profile)
-Smoke test: python -m velogauss.bench.step_profile --quick --out /tmp/bench.md
+Regenerate: velogauss bench step_profile
+Smoke test: velogauss bench step_profile --quick --out /tmp/bench.md
 """
 
-import argparse
 import cProfile
 import pstats
 import tempfile
@@ -22,18 +21,18 @@ import time
 from pathlib import Path
 
 SECTION = "## Training step profile"
-COMMAND = "python -m velogauss.bench.step_profile"
+COMMAND = "velogauss bench step_profile"
 ITERATIONS = 40  # below the 100 between densifications: no densification in the window
 QUICK_ITERATIONS = 3
 # (label, indent, [(path suffix, function name), ...]): the functions whose cumulative time
 # make up the row (summed; none of a row's functions calls another of the same row).
 PARTS = [
-    ("step (`_Loop.step`)", 0, [("train/loop.py", "step")]),
+    ("step (`Trainer.step`)", 0, [("train/loop.py", "step")]),
     ("learning rates + frame draw", 1, [("train/optim.py", "set_learning_rates"), ("train/sampling.py", "sample")]),
     ("motion parameters (`params()`)", 1, [("model/motion.py", "params")]),
-    ("side losses' draws (`side.draw`)", 1, [("train/side.py", "draw")]),
-    ("Gaussians at t (`state_at`: the renders' and the collocation points')", 1,
-     [("model/dynamic.py", "state_at")]),
+    ("side losses' draws (`aux_losses.draw`)", 1, [("train/aux_losses.py", "draw")]),
+    ("Gaussians at t (`moving_state_at`: the renders' and the collocation points')", 1,
+     [("model/velogauss_model.py", "moving_state_at")]),
     ("render (`rasterize`)", 1, [("velogauss_fast/raster.py", "rasterize")]),
     ("preparation: VG-COV, VG-PROJ, VG-SH (numba)", 2, [("backends/numba_projection.py", "forward")]),
     ("row spans (sort, culling; numba)", 2, [("velogauss_fast/spans.py", "row_spans"),
@@ -43,9 +42,9 @@ PARTS = [
     ("renders' backward (`loss.backward`)", 1, [("torch/_tensor.py", "backward")]),
     ("compositing backward (numba)", 2, [("backends/numba_backend.py", "backward")]),
     ("preparation backward (numba)", 2, [("backends/numba_projection.py", "backward")]),
-    ("side losses (`side_loss`, inline here)", 1, [("train/side.py", "side_loss")]),
-    ("collocation points' state (`collocation_near`, in the row of `state_at` too)", 2,
-     [("train/side.py", "collocation_near")]),
+    ("side losses (`loss_and_gradients`, inline here)", 1, [("train/aux_losses.py", "loss_and_gradients")]),
+    ("collocation points' state (`collocation_near`, in the row of `moving_state_at` too)", 2,
+     [("train/aux_losses.py", "collocation_near")]),
     ("physics residuals (`motion_residuals`)", 2, [("model/motion.py", "motion_residuals")]),
     ("mixing entropy (VG-LOSS-MIX, after its code pass)", 2, [("velogauss_fast/losses.py", "mixing_entropy_loss")]),
     ("side losses' backward (`autograd.grad`)", 2, [("torch/autograd/__init__.py", "grad")]),
@@ -56,7 +55,7 @@ PARTS = [
     ("motion, all calls: coefficients of the stages", 1, [("motion/trajectory.py", "_stage_coefficients")]),
     ("motion, all calls: integration (rates, RK stages)", 1, [("motion/integrate.py", "integrate_schedule")]),
     ("motion, all calls: ADF", 1, [("motion/deform.py", "adf_residual")]),
-    ("density control etc. (`maintain`)", 0, [("train/loop.py", "maintain")]),
+    ("density control etc. (`adapt_gaussians`)", 0, [("train/loop.py", "adapt_gaussians")]),
     ("argument checks (`check_array`, `check_finite`, `check_time`)", 0,
      [("velogauss_fast/checks.py", "check_array"), ("velogauss_fast/checks.py", "check_finite"),
       ("motion/scalars.py", "check_time")]),
@@ -87,13 +86,13 @@ def measure(iterations, quick=False):
             for _ in range(count):
                 it = next(iteration)
                 loop.step(it)
-                loop.maintain(it + 1)
+                loop.adapt_gaussians(it + 1)
             return (time.perf_counter() - start) / count
 
         seconds_per_iteration(2)
         unprofiled = seconds_per_iteration(iterations)
-        # cProfile sees only the thread that enabled it, in this process: the side losses run inline from here on.
-        loop.side_worker = None
+        # cProfile sees only its own thread: the side losses run inline from here on.
+        loop.aux_worker = None
         inline = seconds_per_iteration(iterations)
         profiler = cProfile.Profile()
         profiler.enable()
@@ -133,16 +132,3 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=F
         "profiled (inline: cProfile sees one thread; its cost inflates Python-heavy rows).",
     ], regenerate_command(COMMAND, *options, quick=quick), lines)
     return result
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--iterations", type=int, default=None, help=f"default {ITERATIONS}")
-    parser.add_argument("--quick", action="store_true", help=f"smoke test: a 16 px scene, {QUICK_ITERATIONS} iterations")
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    args = parser.parse_args(argv)
-    run(args.out, iterations=args.iterations, quick=args.quick)
-
-
-if __name__ == "__main__":
-    main()

@@ -11,7 +11,7 @@ time: drift and a competitor's bursts hit both sides of a round alike.
 temporary folder), "after" this checkout. Each runs in a worker process of its own, with its
 own imports and its own default threads, on the same scene; the workers take turns, so only
 one runs at a time. The iterations are those of the step profile (`velogauss.bench.step_profile`):
-the default config on the default scene from iteration warmup + curriculum on; `maintain` is
+the default config on the default scene from iteration warmup + curriculum on; `adapt_gaussians` is
 not run, so no densification changes the work between rounds. `--gaussians N` starts both
 from a point cloud of N points instead of the scene's 2,000, the size the default training
 reaches after densification (6,692 Gaussians from iteration 2,000 on), where a change can gain
@@ -26,11 +26,10 @@ and the section says so; the numba kernels of each view's preparation and of the
 photometric loss (float64 inside) do not. Equal quality over a whole training is measured by training, not here (README, "Main
 job"; benchmarks/RESULTS.md).
 
-Regenerate: python -m velogauss.bench.step_ratio   (needs git and the revision)
-Smoke test: python -m velogauss.bench.step_ratio --quick --out /tmp/bench.md
+Regenerate: velogauss bench step_ratio --before REVISION   (needs git and the revision)
+Smoke test: velogauss bench step_ratio --before REVISION --quick --out /tmp/bench.md
 """
 
-import argparse
 import json
 import os
 import statistics
@@ -42,9 +41,7 @@ from pathlib import Path
 import torch
 
 SECTION = "## Training step: before / after"
-COMMAND = "python -m velogauss.bench.step_ratio"
-# The last commit before the side losses (physics, carry, mixing) ran beside the renders.
-BEFORE = "ead8544"
+COMMAND = "velogauss bench step_ratio"
 ROUNDS, ITERATIONS = 7, 20
 QUICK_ROUNDS, QUICK_ITERATIONS = 2, 2
 _WARMUP = 2
@@ -101,7 +98,7 @@ class _Worker:
         self.process.wait()
 
 
-def measure(revision=BEFORE, rounds=ROUNDS, iterations=ITERATIONS, quick=False, gaussians=None):
+def measure(revision, rounds=ROUNDS, iterations=ITERATIONS, quick=False, gaussians=None):
     """{"rounds": [(before, after) mean s per iteration], "ratios", "ratio" (median before/after),
     "agreement" {parameter: (largest |before - after|, largest |after|)}, "losses" (before,
     after) of the last iteration, "gaussians"}. gaussians: the scene's point cloud size, None
@@ -134,7 +131,7 @@ def measure(revision=BEFORE, rounds=ROUNDS, iterations=ITERATIONS, quick=False, 
             "losses": (last["before"]["loss"], last["after"]["loss"]), "gaussians": last["after"]["gaussians"]}
 
 
-def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=None, iterations=None, quick=False,
+def run(out_path="benchmarks/RESULTS.md", device="cpu", *, revision, rounds=None, iterations=None, quick=False,
         gaussians=None):
     """Measure (`measure`) and write the "## Training step: before / after" section (with
     `gaussians`, a point cloud of that size: its own section)."""
@@ -146,7 +143,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=
     rounds, iterations = rounds or default_rounds, iterations or default_iterations
     torch.set_num_threads(1)  # the workers' default, which the section's machine line reports
     result = measure(revision, rounds, iterations, quick, gaussians)
-    options = ([f"--before {revision}"] if revision != BEFORE else []) + \
+    options = [f"--before {revision}"] + \
               ([f"--rounds {rounds}"] if rounds != default_rounds else []) + \
               ([f"--iterations {iterations}"] if iterations != default_iterations else []) + \
               ([f"--gaussians {gaussians}"] if gaussians else [])
@@ -155,7 +152,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", revision=BEFORE, rounds=
         lines.append(f"| {k} | {1e3 * b:.1f} | {1e3 * a:.1f} | {ratio:.2f} |")
     section = f"{SECTION}, {gaussians:,} Gaussians" if gaussians else SECTION
     write_table_section(out_path, section, [
-        f"A training iteration (`_Loop.step`) of the default training on the default scene"
+        f"A training iteration (`Trainer.step`) of the default training on the default scene"
         f"{f' with a point cloud of {gaussians:,} points' if gaussians else ''} ({result['gaussians']} Gaussians; motion, ADF and full physics loss on; velogauss's default threads) with the source tree at "
         f"`{revision}` (before) and this one (after), each in a process of its own, in {rounds} alternating rounds "
         f"of {iterations} iterations. Median before / after: **{result['ratio']:.2f}x**.",
@@ -176,33 +173,3 @@ def _agreement_sentence(result, iterations):
             f"difference of a trainable tensor is {worst[1][0] / max(worst[1][1], 1e-30):.1e} (`{worst[0]}`: "
             f"{worst[1][0]:.1e} of {worst[1][1]:.1e}); {losses}. The versions differ in rounding, which training "
             "carries on; equal quality over whole trainings is measured over seeds in \"Toward a 2x step\" below.")
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", default=BEFORE, help=f"git revision of the 'before' tree (default {BEFORE})")
-    parser.add_argument("--rounds", type=int, default=None, help=f"default {ROUNDS}")
-    parser.add_argument("--iterations", type=int, default=None, help=f"per side and round, default {ITERATIONS}")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"smoke test: a 16 px scene, {QUICK_ROUNDS} rounds of {QUICK_ITERATIONS} iterations")
-    parser.add_argument("--gaussians", type=_positive, default=None,
-                        help="initial Gaussians (the scene's point cloud; default: the scene's 2,000)")
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    args = parser.parse_args(argv)
-    run(args.out, revision=args.before, rounds=args.rounds, iterations=args.iterations, quick=args.quick,
-        gaussians=args.gaussians)
-
-
-def _positive(text):
-    """argparse type: a positive int, else an error naming the value."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-if __name__ == "__main__":
-    main()

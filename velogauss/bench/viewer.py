@@ -17,23 +17,20 @@ machine's load average before and after (the wall-clock numbers are only as quie
 machine was), and the process's CPU time per frame (summed over its threads), which other
 work on the machine inflates far less: 1 / (CPU time per frame) is the frame rate the
 process reaches on one core of its own, a lower bound for what it reaches on two.
-Regenerate: python -m velogauss.bench.viewer   (or: velogauss bench viewer)
+Regenerate: velogauss bench viewer
 """
 
-import argparse
 import os
 import statistics
 import time
 
 import numpy as np
-import torch
-
-from velogauss.threads import apply_threads
 
 from velogauss.bench.harness import machine, regenerate_command, write_section
+from velogauss.threads import apply_threads
 
 SECTION = "## Viewer frames per second (CPU)"
-COMMAND = "python -m velogauss.bench.viewer"
+COMMAND = "velogauss bench viewer"
 JPEG_QUALITY = 85  # as velogauss.view.server sends
 
 
@@ -62,9 +59,8 @@ def ring_camera(angle, size, centre):
 
 def frame(renderer, camera, t, max_time):
     """One viewer frame: render, annotate, JPEG-encode as viser does; returns the bytes."""
-    # viser's private encoder, on purpose: the benchmark times the very encoding the viewer's
-    # background image goes through, which viser exposes under no public name. A third-party
-    # private name, the one exception tests/app/test_layers.py allows.
+    # viser's private encoder: the very encoding the viewer's frames go through (the one
+    # private import tests/app/test_layers.py allows).
     from viser._scene_api import _encode_image_binary
 
     from velogauss.view.frame import annotate
@@ -129,19 +125,3 @@ def _write(out_path, rows, n_points, n_gaussians, size, frames, rounds, threads,
         "\n".join(lines),
     ])
     write_section(out_path, SECTION, text)
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="benchmarks/RESULTS.md")
-    parser.add_argument("--points", type=int, default=10_000)
-    parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--threads", type=int, default=0, help="0: velogauss's default, as `velogauss view`")
-    parser.add_argument("--quick", action="store_true", help="a tiny smoke-test configuration")
-    args = parser.parse_args(argv)
-    run(args.out, n_points=args.points, size=args.size, threads=args.threads, quick=args.quick)
-    print(f"results: {args.out}")
-
-
-if __name__ == "__main__":
-    main()

@@ -6,7 +6,7 @@
 """
 
 from velogauss.model.build import build_model, model_from_state, scene_profile
-from velogauss.model.dynamic import VeloGaussModel
+from velogauss.model.velogauss_model import VeloGaussModel
 from velogauss.model.profile import MotionProfile, resolve_profile
 from velogauss.model.spec import ABLATION_SWITCHES, MotionSpec, resolve_motion_spec
 

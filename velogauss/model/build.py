@@ -6,7 +6,7 @@ into a `MotionSpec` (velogauss.model.spec); the model's parameters are laid out 
 
 import numpy as np
 
-from velogauss.model.dynamic import VeloGaussModel
+from velogauss.model.velogauss_model import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
 from velogauss.model.motion import MotionParameters
 from velogauss.model.profile import MotionProfile, resolve_profile

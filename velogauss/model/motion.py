@@ -9,7 +9,7 @@ Everything the motion computes is a pure function of that dict and the resolved
 - `carry_loss`: VG-LOSS-CARRY, the velocity fitted to the ADF's paths (scheme "adf-step");
 - `velocity_at`, `particle_velocity`: the learned velocities (Eulerian, and along paths),
   the code taken from the network; `own_mixing` and `velocity_with_mixing` build them from
-  given mixing weights (VG-FIELD-GAUSS, which `velogauss.model.dynamic` interpolates);
+  given mixing weights (VG-FIELD-GAUSS, which `velogauss.model.velogauss_model` interpolates);
 - `motion_residuals`: the physics residuals of the training loss.
 
 What is built follows the spec: the velocity's time network ("affine", PDS) or the
@@ -17,11 +17,12 @@ unconstrained velocity MLP ("mlp", no-pds) or neither (deform-only); the acceler
 polynomial Q only when the profile accelerates; the ADF only when the ablation keeps it.
 """
 
+import functools
+
 import numpy as np
 import torch
 from torch import nn
 
-from velogauss.model.beside import adf_residual_beside
 from velogauss.model.spec import MotionSpec
 from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_core.motion import N_BASIS, carry_start, init_motion_params, mlp_layers, network_shapes
@@ -83,8 +84,14 @@ class MotionParameters(nn.Module):
         return out
 
 
+def inline_adf(params: dict, x0: torch.Tensor, t, z: torch.Tensor, cfg):
+    """`gaussians_at`'s default evaluation of the ADF's residual: a function returning
+    `adf_residual(params, x0, t, z, cfg)` (dx (N, 3), dq (N, 4), ds (N, 3)), computed when called."""
+    return functools.partial(adf_residual, params, x0, t, z, cfg)
+
+
 def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tensor, s0: torch.Tensor, t,
-                 offset: float = 0.0, beside: bool = False):
+                 offset: float = 0.0, adf=None):
     """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t of the
     Gaussians whose canonical state is x0 (N, 3), q0 (N, 4) unit, s0 (N, 3) > 0.
 
@@ -96,8 +103,10 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
     spec.carry_until) carried to t by the velocity; the base means are then the means.
     offset: the signed step training draws (±spec.carry_offset), 0 in evaluation; only
     "adf-step" reads it.
-    beside: run the ADF's branch of the backward in a thread beside the integration's of the
-    affine velocity (velogauss.model.beside; the same numbers), for a caller with a second core.
+    adf: how scheme "integrate" evaluates the ADF's residual, `adf(params, x0, t_adf, z,
+    spec.config)` called before the integration and returning a function that gives (Δx, Δq,
+    Δs) after it; None: `inline_adf`. Training passes one whose backward overlaps the
+    integration's (velogauss.train.loop).
     """
     cfg = spec.config
     z = physics_code(params, x0, cfg)
@@ -106,18 +115,14 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
         return x, q, s, x
     if spec.scheme != "integrate":
         raise ValueError(f"spec.scheme: unknown scheme {spec.scheme!r}")
-    adf = None
     if spec.adf:
         t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
-        # Created before the integration, so that the backward reaches its join after it. The
-        # affine velocity's integration only: it reads x0 once, so that x0, like z, receives one
-        # sum from each branch and the numbers stay those of one backward (velogauss.model.beside).
-        if beside and spec.velocity == "affine" and _backward_follows(x0, z):
-            adf = adf_residual_beside(params, x0, t_adf, z, cfg)
+        # Before the integration, so that an evaluation may place graph nodes on either side of it.
+        residual = (inline_adf if adf is None else adf)(params, x0, t_adf, z, cfg)
     xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
     if not spec.adf:
         return xs, qs, ss, xs
-    dx, dq, ds = adf_residual(params, x0, t_adf, z, cfg) if adf is None else adf.value()
+    dx, dq, ds = residual()
     x, q, s = compose_state(xs, qs, ss, dx, dq, ds)
     return x, q, s, xs
 
@@ -192,11 +197,6 @@ def _carried_state(params, spec, x0, q0, s0, z, t, t_start):
     xv = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec.config), xs, t_start, t, spec.step,
                    spec.integrator)
     return xa + (xv - xs), qa, sa
-
-
-def _backward_follows(x0, z):
-    """Whether the ADF's inputs are in a graph that a backward will run through."""
-    return torch.is_grad_enabled() and (x0.requires_grad or z.requires_grad)
 
 
 def _integrated_state(params, spec, x0, q0, s0, z, t):

@@ -27,6 +27,8 @@ rotation, gravity, stretch, shear, oscillation, static) and whether its motion i
 - divergence loss (VG-DIV): only for incompressible motion.
 - how renders composite (VG-RENDER's mode), the config's `model.rasterize_mode`: kept with
   the profile, which every checkpoint stores, so that a model renders as it was trained.
+
+`resolve_profile`'s keyword defaults are the config's (`velogauss.config.ModelConfig`).
 - a scene with no motion effect (`static` alone) builds no velocity at all.
 """
 
@@ -48,9 +50,7 @@ class MotionProfile:
     "harmonic" (VG-ACC-HARM); divergence: the VG-DIV loss is used; pattern_form: the motion
     patterns' time dependence, "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID) or "harmonic"
     (VG-COEF-HARM); rigid_knots: VG-COEF-RIGID's knots per centre, 3 (under gravity) or 2
-    (uniform drift); rasterize_mode: VG-RENDER's mode. acc_form defaults to "poly",
-    pattern_form to "mlp" and rasterize_mode to "classic", what every checkpoint saved before
-    each existed used.
+    (uniform drift); rasterize_mode: VG-RENDER's mode.
     """
 
     effects: tuple
@@ -59,10 +59,10 @@ class MotionProfile:
     acceleration: bool
     acc_mask: tuple
     divergence: bool
-    acc_form: str = "poly"
-    pattern_form: str = "mlp"
-    rigid_knots: int = 3
-    rasterize_mode: str = "classic"
+    acc_form: str
+    pattern_form: str
+    rigid_knots: int
+    rasterize_mode: str
 
     @property
     def n_columns(self):
@@ -70,24 +70,24 @@ class MotionProfile:
         return sum(self.mask)
 
 
-def resolve_profile(effects, incompressible, metadata=None, acceleration="poly", patterns="mlp",
-                    rasterize_mode="classic"):
+def resolve_profile(effects, incompressible, metadata=None, acceleration="poly", patterns="auto",
+                    rasterize_mode="antialiased"):
     """The `MotionProfile` of `effects` / `incompressible` / `acceleration` / `patterns` ("auto"
     or explicit values) and `rasterize_mode`.
 
     "auto" takes the scene's declaration from `metadata` (a parsed scene.json), else every
     effect but oscillation (UNDECLARED_EFFECTS) and incompressible motion (what NVFi-style
     methods assume for real scenes).
-    `acceleration` (config `model.acceleration`, default "poly"): "poly" (VG-ACC), "rigid"
-    (VG-ACC-RIGID), or "auto", rigid when the motion effects are rigid ones, else poly.
-    `patterns` (config `model.patterns`, default "mlp" here, what checkpoints before it used):
-    "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or "auto": harmonic
-    when the effects include oscillation, else rigid when the motion effects are rigid ones,
-    else mlp. Harmonic patterns take the harmonic acceleration (VG-ACC-HARM), which needs their
-    frequencies, whatever `acceleration` says. ValueError when "rigid" is asked of a scene that
-    stretches or shears.
-    `rasterize_mode` (config `model.rasterize_mode`, default "classic" here, what checkpoints
-    before it used): "classic" or "antialiased" (velogauss_core.rendering), taken as it is.
+    `acceleration` (config `model.acceleration`): "poly" (VG-ACC), "rigid" (VG-ACC-RIGID), or
+    "auto", rigid when the motion effects are rigid ones, else poly.
+    `patterns` (config `model.patterns`): "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic"
+    (VG-COEF-HARM), or "auto": harmonic when the effects include oscillation, else rigid when
+    the motion effects are rigid ones, else mlp. Harmonic patterns take the harmonic
+    acceleration (VG-ACC-HARM), which needs their frequencies, whatever `acceleration` says.
+    ValueError when "rigid" is asked of a scene that stretches or shears.
+    `rasterize_mode` (config `model.rasterize_mode`): "classic" or "antialiased"
+    (velogauss_core.rendering), taken as it is.
+    The keyword defaults are the config's.
     """
     if effects == "auto":
         effects = tuple((metadata or {}).get("effects", UNDECLARED_EFFECTS))

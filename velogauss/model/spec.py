@@ -69,8 +69,9 @@ class MotionSpec:
     carry_offset: scheme "adf-step": |t - t_start| of VG-CARRY in training (0 otherwise);
     carry_loss: VG-LOSS-CARRY (the affine velocity fitted to the ADF's paths) can be on:
       scheme "adf-step" with the affine velocity; its weight is train.lambda_carry;
-    query_code: where a material point that is not a Gaussian takes its mixing weights
-      (VG-FIELD-GAUSS); "network" wherever the velocity is not affine (no mixing weights).
+    query_code: where a material point that is not a Gaussian takes its mixing weights:
+      "gaussians" from its nearest Gaussians' (VG-FIELD-GAUSS) under the affine velocity,
+      "network" elsewhere (the velocity MLP of no-pds reads the point itself; no mixing weights).
     """
 
     scheme: Scheme
@@ -137,7 +138,6 @@ def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> M
         carry_until=float(max_time) if carry else None,
         carry_offset=float(model_cfg.carry_offset) if carry else 0.0,
         carry_loss=carry and velocity == "affine",
-        # Only the affine velocity has mixing weights to interpolate.
-        query_code=model_cfg.query_code if velocity == "affine" else "network",
+        query_code="gaussians" if velocity == "affine" else "network",
     )
 

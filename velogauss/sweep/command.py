@@ -6,17 +6,18 @@ from typing import Optional
 
 import typer
 
+from velogauss.errors import user_errors
+
 
 def sweep_command(
     grid: Path = typer.Argument(..., help="Grid file (TOML); see velogauss/sweep/grid.py and benchmarks/grids/."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Sweep folder [default: the grid file's `out`]."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Sweep folder (default: the grid file's `out`)."),
     address: Optional[str] = typer.Option(
         None, help="Join a running Ray cluster (HOST:PORT, or `auto`) instead of starting Ray on this machine."),
-    cpus: Optional[int] = typer.Option(None, help="CPUs local Ray may use [default: all of this machine's]."),
+    cpus: Optional[int] = typer.Option(None, help="CPUs local Ray may use (default: all of this machine's)."),
 ):
     """Train every point of a grid (scenes × ablations × seeds × --set values), one Ray task each; skip
     points already done, record failures and go on; write results.csv, results.md and plots/."""
-    from velogauss.cli import user_errors
     from velogauss.sweep.grid import load_grid
 
     with user_errors():

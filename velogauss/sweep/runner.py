@@ -32,6 +32,7 @@ import time
 import traceback
 from pathlib import Path
 
+from velogauss.run import build_config, load_run_scene, run_evaluation, with_data_dir
 from velogauss.sweep.report import run_metrics, write_report
 
 
@@ -49,8 +50,6 @@ class Plan:
 def point_config(point, config_path, data_dir):
     """The point's training `Config`: `config_path` (or the defaults), its ablation, seed and
     `set` overrides, with `data.dir` = `data_dir`. ValueError naming the key when one is bad."""
-    from velogauss.cli import build_config, with_data_dir
-
     overrides = [f"model.ablation={point.ablation}", f"train.seed={point.seed}", *point.overrides]
     return with_data_dir(build_config(config_path, overrides), data_dir)
 
@@ -97,7 +96,6 @@ def train_point(plan, config_path, threads):
     apply_threads(threads)
     start = time.perf_counter()
     try:
-        from velogauss.cli import load_run_scene, run_evaluation
         from velogauss.train.loop import train
 
         cfg = point_config(plan.point, config_path, plan.data_dir)

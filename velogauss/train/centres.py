@@ -5,21 +5,21 @@ flight exactly when `c(t)` is its centre of mass, the one material point that mo
 parabola. Any other material point `p(t)` of the body gives the same field in the form
 `ω × (x − p(t)) + ṗ(t)`, but its path turns with the body. Inside the observed window a
 parabola follows such a point to within a fraction of a pixel, which the ADF's correction
-absorbs, so the images hardly tell the points apart, and training left the knots on a point
-0.05–0.13 off the axis through the box's centre on toss. Past the window the parabola and the
-point part, and the future frames drift (benchmarks/FIDELITY.md, section 0a).
+absorbs, so the images hardly tell the points apart, and training leaves the knots on a point
+off the axis through the body's centre. Past the window the parabola and the point part, and
+the future frames drift (benchmarks/FIDELITY.md, section 0a).
 
 `anchor_centres` (config `model.rigid_centre = "hull"`) places every pattern's knots, once,
 when the motion starts training (the warm-up's end, when the Gaussians have fitted the
 t = 0 frames), at the centroid of the volume inside the convex hull of the moving Gaussians
 at least RIGID_HULL_OPACITY times as opaque as the most opaque one: the centre of mass of a
-uniform convex body, which the surface's Gaussians bound whatever their density on it. `first_knot_mask` then holds the
-first knot, the centre at t = 0, there; the other knots and the spin train as before. One
-centre for every pattern is one body: "auto" anchors only where the mixing starts uniform,
-the scenes with one body to track (velogauss.train.mixing), and only a centre that moves on
-a parabola (gravity, 3 knots), whose curvature is what lets it follow a turning point: a
-centre that drifts on a line (2 knots) cannot, and on `spin` the learned centre was the
-better one (FIDELITY.md, section 0a).
+uniform convex body, which the surface's Gaussians bound whatever their density on it.
+`first_knot_mask` then holds the first knot, the centre at t = 0, there; the other knots and
+the spin train as before. One centre for every pattern is one body: "auto" anchors only where
+the mixing starts uniform, the scenes with one body to track (velogauss.train.mixing), and
+only a centre that moves on a parabola (gravity, 3 knots), whose curvature is what lets it
+follow a turning point: a centre that drifts on a line (2 knots) cannot, and is better
+learned (FIDELITY.md, section 0a).
 """
 
 import numpy as np
@@ -31,15 +31,16 @@ from velogauss_core.constants import RIGID_HULL_OPACITY
 
 
 def resolve_rigid_centre(choice, profile, mixing_init):
-    """"hull" or "learned" for the config's `model.rigid_centre`, a `MotionProfile` and the
-    config's `model.mixing_init`: "auto" is "hull" for rigid patterns whose centres move on a
-    parabola (3 knots: the scene declares gravity) and whose mixing starts uniform (one
-    body), else "learned". "hull" without rigid patterns raises ValueError."""
+    """"hull" (anchored) or "learned" (trained from the images alone) for the config's
+    `model.rigid_centre` ("auto" or "hull"), a `MotionProfile` and the config's
+    `model.mixing_init`: "auto" is "hull" for rigid patterns whose centres move on a parabola
+    (3 knots: the scene declares gravity) and whose mixing starts uniform (one body), else
+    "learned". "hull" without rigid patterns raises ValueError."""
     rigid = profile.pattern_form == "rigid"
     if choice == "hull" and not rigid:
         raise ValueError(f"model.rigid_centre: 'hull' anchors rigid motion patterns, and this scene's patterns "
-                         f"are {profile.pattern_form!r}; use 'auto' or 'learned'")
-    if choice != "auto":
+                         f"are {profile.pattern_form!r}; use 'auto'")
+    if choice == "hull":
         return choice
     one_body = resolve_mixing_init(mixing_init, profile) == "uniform"
     return "hull" if rigid and profile.rigid_knots == 3 and one_body else "learned"

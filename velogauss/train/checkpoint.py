@@ -4,11 +4,14 @@
 a crash or Ctrl-C during the write leaves the previous checkpoint intact. It holds the
 config, the resolved effect profile, the model's state (its shapes follow from it), the
 optimiser, the density statistics, the NumPy and torch RNG states, the iteration count
-and the training state of `extra` (training time so far, the PSNR moving average).
+and, under the key "extra", the trainer's run state (`velogauss.train.loop.RunState` as a
+dict: training time so far, whether an opacity reset has happened, the PSNR moving average).
 
-The file is one header line `velogauss-checkpoint/2 sha256=<hex>` followed by the bytes of
-the `torch.save`d dict above, whose SHA-256 the header holds and every load checks: flipped
-bytes are reported as a corrupt checkpoint naming the file, never read as other weights.
+The file is one header line `velogauss-checkpoint format_version=<n> sha256=<hex>` followed
+by the bytes of the `torch.save`d dict above, whose SHA-256 the header holds and every load
+checks: flipped bytes are reported as a corrupt checkpoint naming the file, never read as
+other weights. A load refuses any format version but CHECKPOINT_FORMAT: a checkpoint is read
+only by the code that wrote its layout.
 """
 
 import dataclasses
@@ -22,7 +25,10 @@ from velogauss.config import config_from_dict, config_to_dict
 from velogauss.io_utils import write_bytes
 from velogauss.model.build import model_from_state, profile_from_dict
 
-FORMAT = "velogauss-checkpoint/2"
+MAGIC = "velogauss-checkpoint"  # the first word of every checkpoint
+# The layout of the payload, its config and profile; raise it with any change that an older
+# checkpoint would load wrongly under.
+CHECKPOINT_FORMAT = 2
 _KEYS = ("iteration", "config", "profile", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
 
 
@@ -30,8 +36,9 @@ def checkpoint_path(run_dir):
     return Path(run_dir) / "checkpoints" / "latest.pt"
 
 
-def save_checkpoint(run_dir, cfg, profile, model, optimizer, stats, rng, iteration, extra):
-    """Write `latest.pt` atomically. extra: JSON-like training state (elapsed time, flags)."""
+def save_checkpoint(run_dir, cfg, profile, model, optimizer, stats, rng, iteration, run_state):
+    """Write `latest.pt` atomically. run_state: the trainer's `RunState` as a dict
+    (dataclasses.asdict), plain numbers and flags."""
     payload = {
         "iteration": int(iteration),
         "config": config_to_dict(cfg),
@@ -41,26 +48,40 @@ def save_checkpoint(run_dir, cfg, profile, model, optimizer, stats, rng, iterati
         "density": stats.state_dict(),
         "numpy_rng": rng.bit_generator.state,
         "torch_rng": torch.get_rng_state(),
-        "extra": extra,
+        "extra": run_state,
     }
     # Serialised in memory first: a full disk then fails in a plain file write (an OSError
     # naming the path), not inside torch's zip writer.
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     data = buffer.getvalue()
-    write_bytes(checkpoint_path(run_dir), f"{FORMAT} sha256={_digest(data)}\n".encode("ascii") + data)
+    write_bytes(checkpoint_path(run_dir), header(data) + data)
+
+
+def header(data):
+    """The header line (bytes) of a checkpoint whose payload is `data`."""
+    return f"{MAGIC} format_version={CHECKPOINT_FORMAT} sha256={_digest(data)}\n".encode("ascii")
 
 
 def load_checkpoint(run_dir, device="cpu"):
     """The payload of `latest.pt`; ValueError naming the file when it is not a velogauss
-    checkpoint, fails its checksum, lacks a key or holds non-finite model values."""
+    checkpoint, has another format version than CHECKPOINT_FORMAT, fails its checksum, lacks a
+    key or holds non-finite model values."""
     path = checkpoint_path(run_dir)
     if not path.is_file():
         raise FileNotFoundError(2, "no checkpoint in the run folder (train it first)", str(path))
-    header, _, data = path.read_bytes().partition(b"\n")
-    fmt, _, digest = header.decode("ascii", errors="replace").partition(" sha256=")
-    if fmt != FORMAT:
-        raise ValueError(f"{path}: format: not a {FORMAT} file")
+    first, _, data = path.read_bytes().partition(b"\n")
+    name, *fields = first.decode("ascii", errors="replace").split(" ")
+    if not name.startswith(MAGIC):
+        raise ValueError(f"{path}: format: not a {MAGIC} file")
+    fields = dict(field.partition("=")[::2] for field in fields)
+    version = fields.get("format_version")
+    if version != str(CHECKPOINT_FORMAT):
+        found = "no version" if version is None else f"version {version}"
+        raise ValueError(f"{path}: checkpoint format {found}, expected version {CHECKPOINT_FORMAT}: another "
+                         "version of velogauss wrote it; retrain with this version, or check out the release "
+                         "that wrote it")
+    digest = fields.get("sha256")
     if _digest(data) != digest:
         raise ValueError(f"{path}: corrupt checkpoint (its content does not match its sha256 checksum)")
     try:
@@ -68,7 +89,7 @@ def load_checkpoint(run_dir, device="cpu"):
     except Exception as err:  # torch raises many types for a bad payload; all mean "unreadable"
         raise ValueError(f"{path}: unreadable checkpoint ({type(err).__name__}: {err})") from None
     if not isinstance(payload, dict):
-        raise ValueError(f"{path}: format: not a {FORMAT} file")
+        raise ValueError(f"{path}: format: not a {MAGIC} file")
     missing = [key for key in _KEYS if key not in payload]
     if missing:
         raise ValueError(f"{path}: {missing[0]}: missing from the checkpoint")

@@ -8,8 +8,10 @@ Per iteration (velogauss.config holds every number):
 3. loss = photometric (VG-LOSS, the mean over the views) + ramped physics loss (VG-LOSS-PHYS) on collocation
    points at a random time in [0, 1] + lambda_adf · mean |Δx|² (the ADF stays a residual)
    + the mixing weights' entropy (VG-LOSS-MIX: each particle commits to one motion pattern);
-   the losses no render goes through (physics, VG-LOSS-CARRY, mixing) run in a worker process
-   beside the renders (velogauss.train.side, velogauss.train.side_process);
+   the auxiliary losses, which no render goes through (physics, VG-LOSS-CARRY, mixing), run
+   in a worker process beside the renders (velogauss.train.aux_losses,
+   velogauss.train.aux_worker), and the ADF's backward in a thread beside the integration's
+   (velogauss.train.adf_backward_thread);
 4. Adam step with the scheduled learning rates; density statistics; every
    `densify.every` iterations clone/split/prune, opacity resets (each followed by at least a
    reset period of training), static-particle detection.
@@ -20,6 +22,7 @@ finishes the current iteration, writes a checkpoint and stops.
 """
 
 import contextlib
+import dataclasses
 import json
 import signal
 import time
@@ -36,7 +39,7 @@ from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
 from velogauss.model import build_model, model_from_state, scene_profile
 from velogauss.model.build import profile_from_dict
-from velogauss.model.dynamic import render_gaussians
+from velogauss.model.velogauss_model import moving_state_at, render_gaussians
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
@@ -44,7 +47,8 @@ from velogauss.train.centres import anchor_centres, first_knot_mask, resolve_rig
 from velogauss.train.frequency import start_frequency
 from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
-from velogauss.train import side, side_process
+from velogauss.train import aux_losses, aux_worker
+from velogauss.train.adf_backward_thread import adf_evaluation
 from velogauss.train.sampling import FrameSampler, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss_fast.backends import numba_backend
@@ -67,16 +71,14 @@ def train(cfg, data, run_dir, resume=False, progress=True):
     the one it was trained with, except `train.iterations`, which may grow). Sets torch's and
     the compositing kernels' CPU threads from `train.threads` (velogauss.threads).
     """
-    loop, start = prepare(cfg, data, run_dir, resume)
-    loop.run(start, progress)
-    return loop.model.eval()
+    trainer, start = prepare(cfg, data, run_dir, resume)
+    trainer.run(start, progress)
+    return trainer.model.eval()
 
 
 def warn_short_schedule(train_cfg):
     """Warn (UserWarning naming the keys) when fewer iterations train on the whole observed
-    window than the curriculum took to open it. `train.iterations=2000` with the schedule of
-    3000 iterations (warm-up 200, curriculum 1200) left 600 and ended below the frozen
-    baseline; with `train.curriculum=800` the same 2000 iterations extrapolated 5 dB better
+    window than the curriculum took to open it: such a run undertrains the motion
     (benchmarks/FIDELITY.md, section 4). The "auto" schedule never warns. A warning, not an
     error: short runs are legitimate for tests and quick looks. `train_cfg`: a resolved
     `TrainConfig` (config.resolve_schedule)."""
@@ -92,13 +94,14 @@ def warn_short_schedule(train_cfg):
 
 
 def prepare(cfg, data, run_dir, resume=False):
-    """The training state of `train` before its first iteration: (loop, first iteration).
+    """The training state of `train` before its first iteration: (Trainer, first iteration).
 
-    Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `loop.step(it)`
-    and `loop.maintain(it + 1)` then run iteration `it` (the contention benchmark times them).
+    Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `trainer.step(it)`
+    and `trainer.adapt_gaussians(it + 1)` then run iteration `it` (the contention benchmark
+    times them).
     The schedule's "auto" keys and the transport weight's are resolved here
     (`resolve_schedule`, `resolve_transport`): for a new run from `train.iterations` and the
-    scene profile's patterns, on resume to the run's own values; `loop.cfg` and config.toml
+    scene profile's patterns, on resume to the run's own values; `trainer.cfg` and config.toml
     hold the numbers used.
     """
     _, parallel = apply_threads(cfg.train.threads)
@@ -119,7 +122,7 @@ def prepare(cfg, data, run_dir, resume=False):
         rng = np.random.default_rng()
         rng.bit_generator.state = payload["numpy_rng"]
         torch.set_rng_state(payload["torch_rng"])
-        start, extra = payload["iteration"], payload["extra"]
+        start, state = payload["iteration"], RunState(**payload["extra"])
         _truncate_log(run_dir / "log.jsonl", start)
         # The checkpoint and config.toml stay one truth: the changes check_resume_config allows.
         write_text(run_dir / "config.toml", to_toml(cfg))
@@ -135,7 +138,7 @@ def prepare(cfg, data, run_dir, resume=False):
         if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, profile) == "clusters":
             separate_patterns(model.motion, model.gaussians.means, rng)
         start_frequency(model, data.train, data.max_time)
-        start, extra = 0, {"elapsed_s": 0.0, "after_reset": False, "psnr_ema": None}
+        start, state = 0, RunState()
         run_dir.mkdir(parents=True, exist_ok=True)
         write_text(run_dir / "config.toml", to_toml(cfg))
         write_text(run_dir / "log.jsonl", "")
@@ -144,23 +147,36 @@ def prepare(cfg, data, run_dir, resume=False):
     if resume:
         optimizer.load_state_dict(payload["optimizer"])
         stats.load_state_dict(payload["density"])
-    # The side losses go to a worker process where the thread budget allows two parallel parts
-    # (the compositing's); measured on the CPU only, so elsewhere they run inline. Started now
-    # (once per process), so that it has imported torch by the end of the warm-up, which has
-    # no side losses.
-    side_worker = side_process.process() if parallel >= 2 and device.type == "cpu" else None
-    return _Loop(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device, side_worker), start
+    # The auxiliary losses go to a worker process where the thread budget allows two parallel
+    # parts (the compositing's), on the CPU only, whose cores the split shares; elsewhere they
+    # run inline. Started now (once per process), so that it has imported torch by the end of
+    # the warm-up, which has no auxiliary losses.
+    worker = aux_worker.process() if parallel >= 2 and device.type == "cpu" else None
+    return Trainer(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, state, device, worker), start
 
 
-class _Loop:
-    """The state of one training run between iterations."""
+@dataclasses.dataclass
+class RunState:
+    """What a run carries from iteration to iteration besides the model, the optimiser, the
+    density statistics and the RNGs; checkpoints hold it (as a dict, key "extra"), so that a
+    resumed run continues as an uninterrupted one."""
 
-    def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, extra, device,
-                 side_worker):
+    elapsed_s: float = 0.0  # training time of the run's sessions so far
+    after_reset: bool = False  # an opacity reset has happened: densification then prunes by size too
+    psnr_ema: float | None = None  # the progress bar's moving average of the PSNR, None before the first step
+
+
+class Trainer:
+    """The state of one training run between iterations: `step` runs one, `adapt_gaussians`
+    then adapts the set of Gaussians, `run` loops both with logging and checkpoints."""
+
+    def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, state, device,
+                 aux_worker):
         self.cfg, self.data, self.run_dir = cfg, data, run_dir
-        self.side_worker = side_worker  # velogauss.train.side_process: the side losses beside the renders, or None
+        # velogauss.train.aux_worker.AuxWorker: the auxiliary losses beside the renders, or None (inline).
+        self.aux_worker = aux_worker
         self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile
-        self.rng, self.extent, self.extra, self.device = rng, extent, extra, device
+        self.rng, self.extent, self.state, self.device = rng, extent, state, device
         # What the motion computes and which losses are on, resolved once when the model was built.
         self.spec = model.spec
         self.images = [torch.as_tensor(f.image, device=device) for f in data.train]
@@ -172,43 +188,39 @@ class _Loop:
                                     self.spec.moving)
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
-        # deform-only has no velocity to learn first: its ADF is the motion and starts with it.
-        # Under scheme "adf-step" the ADF is the motion inside the window (VG-CARRY): it starts with the motion too.
-        # So does it under the time network's patterns (the deforming scenes: stretch, shear,
-        # grow), where it refines the deformation from the start: stretch's interpolation rose
-        # 0.66 dB (4 seeds), shear's 0.69 dB with its velocity error 0.035 / 0.026 -> 0.026 /
-        # 0.017. Rigid and oscillating patterns wait until the curriculum has opened the window,
-        # so that they, not the ADF, learn the motion: from the warm-up's end multi's velocity
-        # error went from 0.119 to 0.174 (benchmarks/FIDELITY.md, section 0f).
-        # "window" (and -1, configs written before "auto") keeps the rule before that.
-        rule = cfg.train.adf_start
-        adf_first = (self.spec.velocity is None or self.spec.scheme == "adf-step"
-                     or (rule == "auto" and self.spec.velocity == "affine" and self.spec.config.pattern_form == "mlp"))
-        default_start = cfg.train.warmup if adf_first else cfg.train.warmup + cfg.train.curriculum
-        self.adf_start = rule if isinstance(rule, int) and rule >= 0 else default_start
+        self.adf_start = cfg.train.adf_start if cfg.train.adf_start != "auto" else self.auto_adf_start()
         # Rigid patterns anchored on the body's centre (velogauss.train.centres): the mask that
-        # holds their first knot, None when the centres are learned. It applies once the
-        # centres are anchored (extra["centres_anchored"], kept in the checkpoint): a run saved
-        # before there was anchoring resumes with its centres learned, as it was trained.
+        # holds their first knot from the warm-up's end, None when the centres are learned.
         anchored = (self.spec.velocity == "affine" and
                     resolve_rigid_centre(cfg.model.rigid_centre, profile, cfg.model.mixing_init) == "hull")
         self.knot_mask = first_knot_mask(model.motion.time.detach()) if anchored else None
+
+    def auto_adf_start(self):
+        """`train.adf_start = "auto"`: the warm-up's end where the ADF is (part of) the motion
+        from the start (deform-only, which has no velocity; scheme "adf-step", whose window the
+        ADF carries; the time network's patterns, whose deformations it refines), else the
+        curriculum's end, so that rigid and oscillating patterns, not the ADF, learn the motion
+        (benchmarks/FIDELITY.md, section 0f)."""
+        spec, t = self.spec, self.cfg.train
+        adf_first = (spec.velocity is None or spec.scheme == "adf-step"
+                     or (spec.velocity == "affine" and spec.config.pattern_form == "mlp"))
+        return t.warmup if adf_first else t.warmup + t.curriculum
 
     def run(self, start, progress):
         cfg = self.cfg.train
         bar = tqdm(range(start, cfg.iterations), initial=start, total=cfg.iterations, disable=not progress,
                    desc="train", dynamic_ncols=True)
-        # The moving average goes into checkpoints (extra), so a resumed run logs what an
+        # The moving average goes into checkpoints (RunState), so a resumed run logs what an
         # uninterrupted one does.
-        psnr_ema, loss_value = self.extra.get("psnr_ema"), float("nan")
+        psnr_ema, loss_value = self.state.psnr_ema, float("nan")
         # Training time of earlier sessions of this run (resume) plus this session's.
-        elapsed_before, clock = self.extra["elapsed_s"], time.perf_counter()
+        elapsed_before, clock = self.state.elapsed_s, time.perf_counter()
         with _deferred_interrupt() as interrupted:
             for it in bar:
                 loss_value, frame_psnr = self.step(it)
                 psnr_ema = frame_psnr if psnr_ema is None else _PSNR_EMA * psnr_ema + (1 - _PSNR_EMA) * frame_psnr
                 done = it + 1
-                self.maintain(done)
+                self.adapt_gaussians(done)
                 bar.set_postfix(loss=f"{loss_value:.4f}", psnr=f"{psnr_ema:.2f}", n=len(self.model.gaussians),
                                 refresh=False)
                 elapsed = elapsed_before + time.perf_counter() - clock
@@ -216,7 +228,7 @@ class _Loop:
                     self.log_eval(done, loss_value, psnr_ema, elapsed)
                 last = done == cfg.iterations
                 if interrupted() or last or (cfg.checkpoint_every and done % cfg.checkpoint_every == 0):
-                    self.extra["psnr_ema"] = psnr_ema
+                    self.state.psnr_ema = psnr_ema
                     self.checkpoint(done, elapsed)
                 if interrupted():
                     bar.close()
@@ -227,8 +239,9 @@ class _Loop:
     def step(self, it):
         """One optimisation step; returns (loss, PSNR of the first rendered view).
 
-        The side losses (physics, carry, mixing: velogauss.train.side) are drawn first and
-        computed beside the renders; their gradients join the renders' after its backward."""
+        The auxiliary losses (physics, carry, mixing: velogauss.train.aux_losses) are drawn
+        first and computed beside the renders; their gradients join the renders' after its
+        backward."""
         cfg, model = self.cfg, self.model
         set_learning_rates(self.optimizer, it, cfg.train, self.extent)
         indices = self.sampler.sample_views(it, self.rng, cfg.train.views)
@@ -240,17 +253,18 @@ class _Loop:
             self.freeze_motion(it)
             if it == cfg.train.warmup and self.knot_mask is not None:
                 anchor_centres(model)  # the patterns are still until now: the motion does not change
-                self.extra["centres_anchored"] = True
-            params = model.motion.params()  # once per step: the render and the side losses share it
+            params = model.motion.params()  # once per step: the render and the auxiliary losses share it
         offset = self.carry_offset(it, spec)
         self.optimizer.zero_grad(set_to_none=True)
-        pending = side.start(model, self.cfg, params, spec, side.draw(self, it, spec), self.side_worker)
+        draws = aux_losses.draw(cfg, model, spec, it, self.rng, self.data.bounds, self.sampler.window(it),
+                                self.device)
+        pending = aux_losses.start(model, cfg, params, spec, draws, self.aux_worker)
         try:
             with self.render_threads():
                 loss, renders = self.render_loss(frames, indices, params, spec, offset, motion_on)
             loss.backward()
         finally:
-            side_value = side.finish(pending)  # waits for the worker even when the renders raised
+            aux_value = aux_losses.finish(pending)  # waits for the worker even when the renders raised
         for _, meta, camera in renders:
             grad = meta["mean2d"].grad
             if grad is not None:
@@ -258,32 +272,31 @@ class _Loop:
                 # own pixel gradient with its threshold, whatever the number of views per step.
                 self.stats.add(grad.detach() * len(frames), meta["radius"], meta["valid"], camera.width,
                                camera.height)
-        if self.extra.get("centres_anchored") and model.motion.time.grad is not None:
-            model.motion.time.grad.mul_(self.knot_mask)  # the anchored centre at t = 0 stays put
+        if self.knot_mask is not None and it >= cfg.train.warmup and model.motion.time.grad is not None:
+            model.motion.time.grad.mul_(self.knot_mask)  # the centre anchored at the warm-up's end stays put
         self.optimizer.step()
         with torch.no_grad():
             image = renders[0][0]
             frame_psnr = float(psnr(image.detach().clamp(0, 1), self.images[indices[0]]))
-        return float(loss.detach()) + side_value, frame_psnr
+        return float(loss.detach()) + aux_value, frame_psnr
 
     def render_threads(self):
-        """The compositing threads of the step's renders (a context): with the side losses'
+        """The compositing threads of the step's renders (a context): with the auxiliary losses'
         worker, one fewer than the run's, at least one, so that the worker keeps a core while
-        the views render (2 cores: one compositing thread; the step 1.08x faster than with two,
-        the main job's checkpoints equal to the last bit: benchmarks/RESULTS.md, "Toward a 2x
-        step")."""
-        if self.side_worker is None:
+        the views render (benchmarks/RESULTS.md, "Toward a 2x step"); the numbers do not change."""
+        if self.aux_worker is None:
             return contextlib.nullcontext()
         return numba_backend.num_threads(max(1, numba_backend.get_num_threads() - 1))
 
     def render_loss(self, frames, indices, params, spec, offset, motion_on):
         """(photometric loss over the views + the ADF's lambda_adf · mean |Δx|², [(image,
         meta, camera)] of each view): one state for all the views, which show one time."""
-        model = self.model
-        # The ADF's backward beside the integration's where the side losses have a worker too
-        # (the same thread budget, velogauss.model.beside).
-        means, quats, scales, base = model.state_at(frames[0].time, params, spec, offset,
-                                                   self.side_worker is not None)
+        model, g = self.model, self.model.gaussians
+        # The ADF's backward in a thread beside the integration's where the auxiliary losses
+        # have a worker too, as both need the same second core.
+        adf = adf_evaluation(spec) if self.aux_worker is not None else None
+        means, quats, scales, base = moving_state_at(params, spec, g.means, g.quats, g.scales, model.moving,
+                                                     frames[0].time, offset, adf)
         gaussians = model.with_appearance(means, quats, scales)
         renders, loss = [], 0.0
         for frame, index in zip(frames, indices):
@@ -325,21 +338,19 @@ class _Loop:
             return 0.0
         return spec.carry_offset * (1.0 if self.rng.random() < 0.5 else -1.0)
 
-    def maintain(self, done):
-        """Density control, opacity resets and static detection due after `done` iterations
-        (the ADF as the next iteration will run it)."""
+    def adapt_gaussians(self, done):
+        """The density control (densify and prune), opacity resets and static-particle detection
+        due after `done` iterations (the ADF as the next iteration will run it)."""
         d, model = self.cfg.densify, self.model
         if d.start < done <= d.until and done % d.every == 0:
-            densify_and_prune(model, self.optimizer, self.stats, d, self.extent, self.extra["after_reset"],
+            densify_and_prune(model, self.optimizer, self.stats, d, self.extent, self.state.after_reset,
                               torch_generator(self.rng), done)
-        # A reset sets every opacity low, and the schedule gives the Gaussians one period to
-        # recover before the next; a reset with less than that left would end the run on
-        # faded Gaussians (train.iterations=2000 with the other defaults reset at the very
-        # last iteration), so it is skipped, as 3DGS resets only long before its end.
+        # A reset with less than one reset period left would end the run on faded Gaussians,
+        # so it is skipped, as 3DGS resets only long before its end.
         recovers = self.cfg.train.iterations - done >= d.opacity_reset_every
         if d.opacity_reset_every and done % d.opacity_reset_every == 0 and done <= d.until and recovers:
             reset_opacity(model, self.optimizer)
-            self.extra["after_reset"] = True
+            self.state.after_reset = True
         window_open = done >= self.cfg.train.warmup + self.cfg.train.curriculum
         if self.spec.moving and d.static_every and window_open and done % d.static_every == 0:
             with torch.no_grad():
@@ -360,9 +371,10 @@ class _Loop:
             handle.write(json.dumps(record) + "\n")
 
     def checkpoint(self, done, elapsed):
-        self.extra["elapsed_s"] = elapsed
+        """Write the run's checkpoint after `done` iterations and `elapsed` seconds of training."""
+        self.state.elapsed_s = elapsed
         save_checkpoint(self.run_dir, self.cfg, self.profile, self.model, self.optimizer, self.stats, self.rng, done,
-                        self.extra)
+                        dataclasses.asdict(self.state))
 
 
 def _initial_points(data, n_random, rng):

@@ -4,9 +4,8 @@ VG-COEF mixes K motion patterns with weights m(z) = softmax(z A + c) of the phys
 z = E(γ(x0)). At initialisation every pattern is the same (a still scene) and the weights
 are nearly uniform (the largest is ~1/K), so the gradient of each pattern is nearly the
 mean over all particles: the patterns move together, and the difference between two bodies
-is a small-eigenvalue direction that Adam crawls along. On `multi` the spins of its small
-bodies were still a third learned after 3,000 iterations, and the bottom of the spinning
-cube was held by the still ground it touches (benchmarks/FIDELITY.md, section 0b).
+is a small-eigenvalue direction that Adam crawls along: bodies that move differently, or a
+body beside the still ground, are learned slowly (benchmarks/FIDELITY.md, section 0b).
 
 `separate_patterns` (config `model.mixing_init = "clusters"`) partitions the initial
 points into K clusters (k-means) and fits the code network and the mixing layer so that each
@@ -17,7 +16,7 @@ finds the bodies (spec/motion.md, VG-COEF, "Initialisation").
 
 The regions are not bodies: one body is cut into several, each of which must learn the
 body's whole motion from its own pixels. That is what a scene of several motions needs and a
-scene of one body pays for (toss got worse), hence "auto" (`resolve_mixing_init`). In
+scene of one body pays for, hence "auto" (`resolve_mixing_init`). In
 training, the mixing entropy (VG-LOSS-MIX) then makes each particle commit to one of the
 patterns it started near, so the regions of one body settle on one motion.
 """

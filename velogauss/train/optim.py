@@ -40,7 +40,7 @@ def make_optimizer(model, train_cfg, extent):
             # C, not the frequency (VG-COEF-HARM): Adam moves a parameter by about its rate
             # per step whatever its gradient, and the shared frequency, started where the
             # video oscillates, is barely determined while the curriculum's window is shorter
-            # than a period; at the larger rate it drifted from 9.42 to 9.0 on pulse.
+            # than a period, so at the larger rate it drifts.
             acc.append(model.motion.time[0])
         networks = [p for p in model.motion.parameters() if all(p is not a for a in acc)]
         groups.append({"params": networks, "lr": t.lr_motion, "name": "motion"})

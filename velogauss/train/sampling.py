@@ -54,11 +54,16 @@ class FrameSampler:
 
 def collocation_points(bounds, margin, n_points, rng, dtype, device):
     """(x (n_points, 3) uniform in `bounds (2, 3)` grown by `margin` of its size per side,
-    t uniform in [0, 1])."""
+    t = `collocation_time(rng)`), drawn in that order."""
     lo, hi = np.asarray(bounds[0], dtype=np.float64), np.asarray(bounds[1], dtype=np.float64)
     pad = margin * (hi - lo)
     x = rng.uniform(lo - pad, hi + pad, size=(n_points, 3))
-    return torch.as_tensor(x, dtype=dtype, device=device), float(rng.uniform(0.0, 1.0))
+    return torch.as_tensor(x, dtype=dtype, device=device), collocation_time(rng)
+
+
+def collocation_time(rng):
+    """The collocation time of an iteration, uniform in [0, 1]: the future is constrained too."""
+    return float(rng.uniform(0.0, 1.0))
 
 
 def draw_near(count, n_points, jitter, rng, dtype, device):

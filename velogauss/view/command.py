@@ -8,24 +8,25 @@ from typing import Optional
 
 import typer
 
+from velogauss.errors import user_errors
+from velogauss.run import load_run_model, load_run_scene, recorded_data_dir
+from velogauss.threads import apply_threads
+
 
 def view_command(
     run_dir: Path = typer.Argument(..., help="Run folder written by `velogauss train`."),
     host: str = typer.Option("127.0.0.1", help="Address to bind; 0.0.0.0 serves every network interface."),
     port: int = typer.Option(8080, help="TCP port of the viewer's web page."),
     horizon: Optional[float] = typer.Option(
-        None, help="End of the time slider [default: max(1.5 × max_time, 1.0)]; beyond max_time is the future."),
+        None, help="End of the time slider (default: max(1.5 × max_time, 1.0)); beyond max_time is the future."),
     resolution: Optional[int] = typer.Option(
-        None, help="Longer side of a still frame in pixels [default: 256 on the CPU, 768 on CUDA]."),
-    threads: Optional[int] = typer.Option(None, help="CPU threads for torch and the compositing kernels [default: velogauss.threads' choice, see the README]."),
-    data: Optional[Path] = typer.Option(None, "--data", help="Scene folder [default: the one the run was trained on]."),
-    device: Optional[str] = typer.Option(None, help="Torch device: cpu, cuda ... [default: cuda when available]."),
+        None, help="Longer side of a still frame in pixels (default: 256 on the CPU, 768 on CUDA)."),
+    threads: Optional[int] = typer.Option(None, help="CPU threads for torch and the compositing kernels (default: velogauss.threads' choice, see the README)."),
+    data: Optional[Path] = typer.Option(None, "--data", help="Scene folder (default: the one the run was trained on)."),
+    device: Optional[str] = typer.Option(None, help="Torch device: cpu, cuda ... (default: cuda when available)."),
 ):
     """Explore a trained run in the browser: orbit the scene, scrub or play time past the observed window
     into the future, show velocity arrows, trajectories and the ground-truth cameras."""
-    from velogauss.cli import load_run_model, load_run_scene, recorded_data_dir, user_errors
-    from velogauss.threads import apply_threads
-
     with user_errors():
         if importlib.util.find_spec("viser") is None:
             raise ValueError("velogauss view needs viser: pip install 'velogauss[view]'")

@@ -22,7 +22,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from velogauss.data.cameras import Camera
 from velogauss.io_utils import to_uint8
-from velogauss.model.dynamic import render_gaussians
+from velogauss.model.velogauss_model import render_gaussians
 
 OBSERVED_COLOR = (38, 140, 64)
 FUTURE_COLOR = (217, 51, 38)
@@ -68,7 +68,7 @@ class FrameRenderer:
         self._gaussians = None
 
     def gaussians(self, t, physics_only=False):
-        """The `gaussians_at` dict at time t, of the full model or the physics-only base state."""
+        """The `render_inputs_at` dict at time t, of the full model or the physics-only base state."""
         key = (float(t), bool(physics_only))
         if key != self._key:
             # Physics-only is the model's own spec with the ADF skipped (VG-ADF-COMPOSE).

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from velogauss_core.constants import LAMBDA_DSSIM, SSIM_K1, SSIM_K2
-from velogauss_core.windows import gaussian_window
+from velogauss_core.ssim_window import gaussian_window
 
 _C1, _C2 = SSIM_K1**2, SSIM_K2**2
 _WINDOW = gaussian_window()

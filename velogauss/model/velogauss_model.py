@@ -34,7 +34,7 @@ class VeloGaussModel(nn.Module):
     (velogauss_core.rendering, the config's `model.rasterize_mode`).
     """
 
-    def __init__(self, gaussians, motion, spec: MotionSpec, rasterize_mode: RasterizeMode = "classic"):
+    def __init__(self, gaussians, motion, spec: MotionSpec, rasterize_mode: RasterizeMode):
         super().__init__()
         check_mode(rasterize_mode)
         self.rasterize_mode = rasterize_mode
@@ -58,15 +58,12 @@ class VeloGaussModel(nn.Module):
         """The motion parameter dict (`MotionParameters.params`), None for a static scene."""
         return None if self.motion is None else self.motion.params()
 
-    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None, offset: float = 0.0,
-                 beside: bool = False):
+    def state_at(self, t, params: dict | None = None, spec: MotionSpec | None = None, offset: float = 0.0):
         """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t.
 
         params: the motion parameter dict, when the caller already built it this step;
         spec: a variant of the model's spec (training skips the ADF before it learns);
-        offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY);
-        beside: the ADF's backward in a thread beside the rest (training with two cores,
-        `velogauss.model.motion.gaussians_at`).
+        offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY).
         A non-finite or non-scalar t raises ValueError.
         """
         _check_time(t)
@@ -74,17 +71,17 @@ class VeloGaussModel(nn.Module):
         g = self.gaussians
         if spec.moving and params is None:
             params = self.motion.params()
-        return moving_state_at(params, spec, g.means, g.quats, g.scales, self.moving, t, offset, beside)
+        return moving_state_at(params, spec, g.means, g.quats, g.scales, self.moving, t, offset)
 
-    def gaussians_at(self, t):
-        """The Gaussians at time t as a dict: means, quats, scales, opacities (N,), colors
-        (N, (D+1)^2, 3) SH coefficients, sh_degree and rasterize_mode (what export and the
-        renderer take)."""
+    def render_inputs_at(self, t):
+        """The Gaussians at time t with their appearance, as a dict: means, quats, scales,
+        opacities (N,), colors (N, (D+1)^2, 3) SH coefficients, sh_degree and rasterize_mode
+        (what export and the renderer take)."""
         means, quats, scales, _ = self.state_at(t)
         return self.with_appearance(means, quats, scales)
 
     def with_appearance(self, means, quats, scales):
-        """The `gaussians_at` dict for a given geometry (N, 3), (N, 4), (N, 3)."""
+        """The `render_inputs_at` dict for a given geometry (N, 3), (N, 4), (N, 3)."""
         g = self.gaussians
         return {"means": means, "quats": quats, "scales": scales, "opacities": g.opacities, "colors": g.sh,
                 "sh_degree": g.sh_degree, "rasterize_mode": self.rasterize_mode}
@@ -148,21 +145,22 @@ class VeloGaussModel(nn.Module):
 
 
 def moving_state_at(params: dict | None, spec: MotionSpec, x0, quats, s0, moving, t, offset: float = 0.0,
-                    beside: bool = False):
+                    adf=None):
     """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t of the
     Gaussians whose canonical state is x0 (N, 3), quats (N, 4) (any norm), s0 (N, 3) > 0,
     the motion moving those flagged in `moving` (N,) bool and the others left canonical.
 
-    `VeloGaussModel.state_at` without the model (the side losses' process has its tensors,
-    not the model: velogauss.train.side), t checked by the caller; params: the motion
-    parameter dict, unread when nothing moves; offset, beside: as `state_at`'s.
+    `VeloGaussModel.state_at` without the model (the auxiliary losses' worker has its tensors,
+    not the model: velogauss.train.aux_losses), t checked by the caller; params: the motion
+    parameter dict, unread when nothing moves; offset: as `state_at`'s; adf: how the ADF's
+    residual is evaluated (`velogauss.model.motion.gaussians_at`).
     """
     q0 = normalize_quat(quats)
     if not spec.moving or not bool(moving.any()):
         return x0, q0, s0, x0
     idx = torch.nonzero(moving).squeeze(1)
     x, q, s, xs = motion_fns.gaussians_at(params, spec, x0.index_select(0, idx), q0.index_select(0, idx),
-                                          s0.index_select(0, idx), t, offset, beside)
+                                          s0.index_select(0, idx), t, offset, adf)
     return x0.index_copy(0, idx, x), q0.index_copy(0, idx, q), s0.index_copy(0, idx, s), x0.index_copy(0, idx, xs)
 
 
@@ -175,7 +173,7 @@ def _check_time(t):
 
 
 def render_gaussians(g, camera, background):
-    """Rasterize a `gaussians_at` dict `g` from `camera` over `background (3,)`."""
+    """Rasterize a `VeloGaussModel.render_inputs_at` dict `g` from `camera` over `background (3,)`."""
     ref = g["means"]
     viewmat = torch.as_tensor(camera.viewmat, dtype=ref.dtype, device=ref.device)
     K = torch.as_tensor(camera.K, dtype=ref.dtype, device=ref.device)

@@ -11,12 +11,11 @@ ray from the camera centre meets is the point itself (the analytic ray-caster,
 an error that sits on the unseen part comes from what the model does between the Gaussians
 the images place, not from the images.
 
-Regenerate: python -m velogauss.bench.visibility RUN_DIR [RUN_DIR ...] [--data SCENE_DIR]
+Regenerate: velogauss diagnose visibility RUN_DIR [RUN_DIR ...] [--data SCENE_DIR]
 (`--data`: the generated scene when it is not RUN_DIR/data, e.g. a fidelity run's
 CACHE/data/SCENE.)
 """
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -76,21 +75,17 @@ def split_velocity_errors(model, scene, frames, max_time):
     return rows
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", help="trained run folders")
-    parser.add_argument("--data", default=None, help="the generated scene (default: RUN_DIR/data)")
-    args = parser.parse_args(argv)
+TABLE_HEADER = "| run | body | part | points | vel. err obs | vel. err fut |\n|---|---|---|---:|---:|---:|"
+
+
+def table_rows(run_dir, data_dir=None):
+    """The rows of the diagnostic's markdown table (under TABLE_HEADER) for one trained run:
+    `split_velocity_errors` over its training frames. `data_dir`: the generated scene (default
+    RUN_DIR/data)."""
     fmt = lambda v: "—" if v is None else f"{v:.3f}"  # noqa: E731
-    print("| run | body | part | points | vel. err obs | vel. err fut |\n|---|---|---|---:|---:|---:|")
-    for run in args.runs:
-        model, cfg = load_model(run)
-        data_dir = Path(run) / "data" if args.data is None else Path(args.data)
-        frames = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res).train
-        for row in split_velocity_errors(model, load_ground_truth(data_dir), frames, cfg.data.max_time):
-            print(f"| {run} | {row['body']} | {row['part']} | {row['points']} | {fmt(row['observed'])} | "
-                  f"{fmt(row['future'])} |")
-
-
-if __name__ == "__main__":
-    main()
+    model, cfg = load_model(run_dir)
+    data_dir = Path(run_dir) / "data" if data_dir is None else Path(data_dir)
+    frames = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res).train
+    for row in split_velocity_errors(model, load_ground_truth(data_dir), frames, cfg.data.max_time):
+        yield (f"| {run_dir} | {row['body']} | {row['part']} | {row['points']} | {fmt(row['observed'])} | "
+               f"{fmt(row['future'])} |")

@@ -11,12 +11,11 @@ that every seed shares shows here as the same vector run after run, where the no
 training would scatter it. With rigid motion patterns (VG-COEF-RIGID) it also gives how far
 each body's pattern has put its centre from the axis through the body's true centre.
 
-Regenerate: python -m velogauss.bench.centre RUN_DIR [RUN_DIR ...] [--data SCENE_DIR] [--times 0,0.375,0.75,1]
+Regenerate: velogauss diagnose centre RUN_DIR [RUN_DIR ...] [--data SCENE_DIR] [--times 0,0.375,0.75,1]
 (`--data`: the generated scene when it is not RUN_DIR/data, e.g. a fidelity run's
 CACHE/data/SCENE.)
 """
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +29,8 @@ from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_weights
 
 DEFAULT_TIMES = (0.0, 0.375, 0.75, 1.0)
-# Half the step of the central differences of the velocity gradient, in world units: the
-# particle velocity is affine in the position at a frozen code, so any step gives the
-# gradient up to float32 rounding, which a step near the bodies' size keeps small.
+# Half the central-difference step of the velocity gradient (world units): the particle velocity
+# is affine in x at a frozen code, so a step near the bodies' size only keeps rounding small.
 GRADIENT_STEP = 0.1
 
 
@@ -126,31 +124,23 @@ def _spin(velocity, x):
     return 0.5 * np.array([grad[2, 1] - grad[1, 2], grad[0, 2] - grad[2, 0], grad[1, 0] - grad[0, 1]])
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", help="trained run folders")
-    parser.add_argument("--data", default=None, help="the generated scene (default: RUN_DIR/data)")
-    parser.add_argument("--times", default=",".join(str(t) for t in DEFAULT_TIMES))
-    args = parser.parse_args(argv)
-    times = [float(t) for t in args.times.split(",")]
+def report(run_dir, data_dir=None, times=DEFAULT_TIMES):
+    """The diagnostic of one trained run, line by line: per moving body, the velocity error at
+    each of `times`, the spin and the two mean accelerations against the truth, and (rigid
+    patterns only) the knots' offset from the axis through the true centre. `data_dir`: the
+    generated scene (default RUN_DIR/data)."""
     fmt = lambda v: np.array2string(np.asarray(v), precision=3, sign="+")  # noqa: E731
-    for run in args.runs:
-        model, cfg = load_model(run)
-        scene = load_ground_truth(Path(run) / "data" if args.data is None else args.data)
-        motion = centre_motion(model, scene, cfg.data.max_time)
-        offsets = reference_offsets(model, scene) if model.spec.rigid_patterns else {}
-        for name, rows in centre_errors(model, scene, times).items():
-            # |error| beside the true speed, not their ratio: a centre spinning in place is at rest.
-            cells = "  ".join(f"t={t:g}: {fmt(err)} (|error| {np.linalg.norm(err):.3f} at speed {speed:.3f})"
-                              for t, err, speed in rows)
-            print(f"{run} [{name}] velocity error  {cells}")
-            for key, (learned, truth) in motion[name].items():
-                print(f"{run} [{name}] {key}: learned {fmt(learned)}, true {fmt(truth)}, "
-                      f"error {fmt(learned - truth)}")
-            if name in offsets:
-                cells = "  ".join(f"t={tau:g}: {offset:.3f}" for tau, offset in offsets[name])
-                print(f"{run} [{name}] rigid centre's offset from the axis through the true centre  {cells}")
-
-
-if __name__ == "__main__":
-    main()
+    model, cfg = load_model(run_dir)
+    scene = load_ground_truth(Path(run_dir) / "data" if data_dir is None else data_dir)
+    motion = centre_motion(model, scene, cfg.data.max_time)
+    offsets = reference_offsets(model, scene) if model.spec.rigid_patterns else {}
+    for name, rows in centre_errors(model, scene, times).items():
+        # |error| beside the true speed, not their ratio: a centre spinning in place is at rest.
+        cells = "  ".join(f"t={t:g}: {fmt(err)} (|error| {np.linalg.norm(err):.3f} at speed {speed:.3f})"
+                          for t, err, speed in rows)
+        yield f"{run_dir} [{name}] velocity error  {cells}"
+        for key, (learned, truth) in motion[name].items():
+            yield f"{run_dir} [{name}] {key}: learned {fmt(learned)}, true {fmt(truth)}, error {fmt(learned - truth)}"
+        if name in offsets:
+            cells = "  ".join(f"t={tau:g}: {offset:.3f}" for tau, offset in offsets[name])
+            yield f"{run_dir} [{name}] rigid centre's offset from the axis through the true centre  {cells}"

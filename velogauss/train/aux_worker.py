@@ -1,14 +1,12 @@
-"""The side losses of a training step in a process of their own (velogauss.train.side).
+"""The worker process that computes a training step's auxiliary losses (velogauss.train.aux_losses).
 
-Why a process: a worker thread computed them beside the renders before, and the main thread
-then took 28-31 ms per step, against 25-27 ms beside a stand-in thread that ran as long and
-held no GIL, and 25-27 ms with no side losses at all. The side losses are hundreds of small
-torch operations, each holding Python's GIL for its microseconds of Python, and the main
-thread's own small operations waited for it (benchmarks/RESULTS.md, "Toward a 2x step"). A
-process has a GIL of its own.
+Why a process, not a thread: the auxiliary losses are hundreds of small torch operations, each
+holding Python's GIL for its microseconds of Python, and in a thread the main thread's own
+small operations waited for it (benchmarks/RESULTS.md, "Toward a 2x step"). A process has a
+GIL of its own.
 
 What crosses, per step:
-- the motion parameters and the canonical Gaussians (`velogauss.train.side.Canonical`),
+- the motion parameters and the canonical Gaussians (`velogauss.train.aux_losses.Canonical`),
   copied by the main process into shared memory (files mapped by both, unlinked once the
   process has mapped them) before the step, which it changes only after `finish`; the
   process copies them into tensors of its own;
@@ -16,11 +14,11 @@ What crosses, per step:
   the configuration and the parameters' layout;
 - back: the gradients in shared memory, the loss and which gradients exist through the socket.
 
-The process computes what a thread would: `side_loss`, with the same operations on the same
+The process computes what a thread would: `loss_and_gradients`, with the same operations on the same
 values and torch's thread count of the main process, so the training is the same to the last
 bit (tests/app/test_train.py). One process serves every training of its parent, one step at
 a time: `process()` starts it when a training is prepared, as `python -m
-velogauss.train.side_process` (a fresh interpreter: no locks forked in a held state, and
+velogauss.train.aux_worker` (a fresh interpreter: no locks forked in a held state, and
 unlike multiprocessing's spawn it never imports the parent's script, which may have no
 `if __name__ == "__main__"` guard). It runs in a session of its own, so Ctrl-C in a terminal
 is the training's alone (velogauss.train.loop checkpoints, then stops), and it exits when
@@ -42,7 +40,7 @@ import numpy as np
 import torch
 
 from velogauss.model.motion import MotionParameters
-from velogauss.train import side
+from velogauss.train import aux_losses
 
 # Rows per Gaussian in the shared buffer of the canonical Gaussians: means 3, quats 4, scales 3.
 _ROWS = (3, 4, 3)
@@ -50,12 +48,12 @@ _PROCESS = None
 
 
 def process():
-    """The side-loss process of this process, started (or restarted, after it ended) here."""
+    """The auxiliary losses' worker of this process, started (or restarted, after it ended) here."""
     global _PROCESS
     if _PROCESS is None or not _PROCESS.alive():
         if _PROCESS is None:
             atexit.register(_close)
-        _PROCESS = SideProcess()
+        _PROCESS = AuxWorker()
     return _PROCESS
 
 
@@ -64,15 +62,14 @@ def _close():
         _PROCESS.close()
 
 
-class SideProcess:
-    """A process computing `velogauss.train.side.side_loss` for the steps `submit` sends it."""
+class AuxWorker:
+    """A process computing `velogauss.train.aux_losses.loss_and_gradients` for the steps
+    `submit` sends it."""
 
     def __init__(self):
         ours, theirs = socket.socketpair()
-        # The parent's imports; and idle OpenMP threads that sleep, whatever the parent's policy:
-        # beside the main process, spinning ones took its cores (torch's default threads with
-        # libgomp's default policy: a step 53 ms idle, 237 ms beside a busy process, against
-        # 41 and 60 ms with the side losses in a thread, benchmarks/RESULTS.md). Where threads
+        # The parent's imports; and idle OpenMP threads that sleep, whatever the parent's policy,
+        # as spinning ones take the main process's cores (benchmarks/RESULTS.md). Where threads
         # wait changes no number.
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(p or os.getcwd() for p in sys.path),
                    OMP_WAIT_POLICY="PASSIVE")
@@ -89,7 +86,13 @@ class SideProcess:
         self._mapped = []  # files the process maps on its next message: unlinked after its answer
         self._pending = False
 
+    @property
+    def pid(self):
+        """The worker process's id."""
+        return self._process.pid
+
     def alive(self):
+        """Whether the worker process is still running."""
         return self._process.poll() is None
 
     def close(self):
@@ -103,10 +106,10 @@ class SideProcess:
             self._process.wait()
 
     def submit(self, motion, canon, cfg, spec, draws):
-        """Start `side_loss` of `draws` for the motion parameters of `motion`
+        """Start `loss_and_gradients` of `draws` for the motion parameters of `motion`
         (velogauss.model.motion.MotionParameters, those requiring a gradient differentiated),
         the `Canonical` canon, config `cfg` and the step's MotionSpec `spec`; returns the
-        pending result (`.result()`: what `side_loss` returns, gradients onto `motion`'s
+        pending result (`.result()`: what `loss_and_gradients` returns, gradients onto `motion`'s
         parameters)."""
         if self._pending:
             self.receive()  # a step whose result nobody took: its answer comes first
@@ -145,7 +148,7 @@ class SideProcess:
 
     def receive(self):
         """The answer to the last `submit`: (loss, which parameters got a gradient); raises
-        what the side losses raised, with the process's traceback as its cause."""
+        what the auxiliary losses raised, with the process's traceback as its cause."""
         try:
             reply = pickle.loads(self._conn.recv_bytes())
         except (EOFError, OSError):
@@ -161,7 +164,7 @@ class SideProcess:
     def _shared(self, numel, dtype):
         """A tensor (numel,) of `dtype` in a file both processes map; its path joins `_mapped`."""
         folder = "/dev/shm" if os.access("/dev/shm", os.W_OK) else None
-        handle, path = tempfile.mkstemp(prefix="velogauss-side-", dir=folder)
+        handle, path = tempfile.mkstemp(prefix="velogauss-aux-", dir=folder)
         os.close(handle)
         self._mapped.append((path, numel, dtype))
         return _mapped(path, numel, dtype)
@@ -177,12 +180,12 @@ class SideProcess:
             code = self._process.wait(timeout=1.0)
         except subprocess.TimeoutExpired:
             code = None
-        return RuntimeError(f"side losses: their process ({self._process.pid}) ended, exit code {code}; "
+        return RuntimeError(f"auxiliary losses: their process ({self._process.pid}) ended, exit code {code}; "
                             "the training step cannot finish")
 
 
 class _Pending:
-    """`SideProcess.submit`'s result, once the process has it."""
+    """`AuxWorker.submit`'s result, once the process has it."""
 
     def __init__(self, owner, params, flags):
         self._owner, self._params, self._flags = owner, params, flags
@@ -193,7 +196,7 @@ class _Pending:
 
 
 class RemoteTraceback(Exception):
-    """The traceback of an exception raised in the side-loss process (its `__cause__`)."""
+    """The traceback of an exception raised in the auxiliary losses' worker (its `__cause__`)."""
 
     def __str__(self):
         return "\n" + self.args[0]
@@ -215,7 +218,7 @@ def serve(conn):
 
 
 def _step(held, extras, n, flags, spec, draws):
-    """One step's side losses in the process: (loss (float), which parameters got a gradient)."""
+    """One step's auxiliary losses in the process: (loss (float), which parameters got a gradient)."""
     if "setup" in extras:
         motion_spec, cfg, threads, files = extras["setup"]
         torch.set_num_threads(threads)
@@ -234,9 +237,9 @@ def _step(held, extras, n, flags, spec, draws):
             p.copy_(value)
             p.requires_grad_(flag)
     means, quats, scales = (v.view(n, -1).clone() for v in buffer[:sum(_ROWS) * n].split([r * n for r in _ROWS]))
-    canon = side.Canonical(means, quats, scales, moving[:n].clone())
-    loss, grads = side.side_loss(canon, side.motion_leaves(motion), held["cfg"], motion.params(), held["spec"],
-                                 _tensors(draws))
+    canon = aux_losses.Canonical(means, quats, scales, moving[:n].clone())
+    loss, grads = aux_losses.loss_and_gradients(canon, aux_losses.motion_leaves(motion), held["cfg"], motion.params(),
+                                                held["spec"], _tensors(draws))
     found = dict(grads)
     present = []
     for p, out in zip(params, _per_parameter(held["grads"], params)):
@@ -259,7 +262,7 @@ def _mapped(path, numel, dtype):
 
 
 def _arrays(draws):
-    """`draws` (velogauss.train.side.Draws) with NumPy arrays for its tensors."""
+    """`draws` (velogauss.train.aux_losses.Draws) with NumPy arrays for its tensors."""
     return _map_tensors(draws, lambda v: v.numpy())
 
 

@@ -1,32 +1,31 @@
-"""The losses of a training step that no render goes through, computed beside the renders.
+"""The auxiliary losses of a training step: those no render goes through, computed beside the renders.
 
-VG-LOSS-PHYS, VG-LOSS-CARRY and VG-LOSS-MIX read the motion parameters and detached
-canonical Gaussians only: nothing of the renders' graph reaches them, and their gradients
-reach the motion parameters only. A step therefore
+VG-LOSS-PHYS (the physics residuals), VG-LOSS-CARRY and VG-LOSS-MIX (the mixing weights'
+entropy) read the motion parameters and detached canonical Gaussians only: nothing of the
+renders' graph reaches them, and their gradients reach the motion parameters only. A step
+therefore
 
 1. draws their random numbers first, in the main thread and always in the same order
    (`draw`), so a run's draws never depend on timing and a resumed run repeats them;
-2. computes them and their gradients (`side_loss`, torch.autograd.grad onto the motion
-   parameters) in a worker process while the main thread renders (`start`;
-   velogauss.train.side_process);
+2. computes them and their gradients (`loss_and_gradients`, torch.autograd.grad onto the
+   motion parameters) in a worker process while the main thread renders (`start`;
+   velogauss.train.aux_worker);
 3. adds those gradients to the renders' after its own backward (`finish`), always
    in that order: the numbers depend neither on which finishes first nor on whether
    a worker ran at all (one thread, `--threads 1` or OMP_NUM_THREADS=1: the same function
    runs inline).
 
-The side losses read the motion parameters and the detached canonical Gaussians
+The auxiliary losses read the motion parameters and the detached canonical Gaussians
 (`Canonical`), not the model: that is all the worker process is sent.
 
-Why a worker helps on a 2-core CPU: the side losses are a quarter of a step's work (the
-profile in benchmarks/RESULTS.md). The worker waits on a socket, not in an OpenMP barrier, so
+Why a worker helps on a CPU with two cores: the auxiliary losses are a large share of a step's
+work (the profile in benchmarks/RESULTS.md). The worker waits on a socket, not in an OpenMP barrier, so
 beside another process it takes no core that it does not use (velogauss/threads.py).
 
 Collocation points near the Gaussians (placement "gaussians") are drawn as indices into the
 moving Gaussians plus offsets. Every moving Gaussian is moved to the collocation time, not
-only the drawn ones: a batch of another size rounds differently in float32, and those
-roundings, grown over a training, changed the default scene's results by several dB
-(benchmarks/RESULTS.md, "Toward a 2x step"); moving all of them keeps the training the one
-the losses computed after the renders would give, to the last bit.
+only the drawn ones, as the renders move them: a batch of another size rounds differently in
+float32, and training grows such roundings into different results.
 """
 
 from typing import NamedTuple
@@ -34,9 +33,9 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from velogauss.model.dynamic import moving_state_at
+from velogauss.model.velogauss_model import moving_state_at
 from velogauss.model.motion import carry_loss, motion_residuals
-from velogauss.train.sampling import collocation_points, draw_near
+from velogauss.train.sampling import collocation_points, collocation_time, draw_near
 from velogauss_fast.losses import mixing_entropy_loss, physics_loss
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_logits
@@ -63,7 +62,7 @@ class CarryDraw(NamedTuple):
 
 
 class Canonical(NamedTuple):
-    """What the side losses read of the model: its canonical Gaussians, detached, means (N, 3),
+    """What the auxiliary losses read of the model: its canonical Gaussians, detached, means (N, 3),
     quats (N, 4) (raw, any norm), scales (N, 3) > 0, and which of them move, moving (N,) bool."""
 
     means: torch.Tensor
@@ -79,13 +78,13 @@ def canonical(model):
 
 
 def motion_leaves(motion):
-    """The motion parameters (velogauss.model.motion.MotionParameters) the side losses
+    """The motion parameters (velogauss.model.motion.MotionParameters) the auxiliary losses
     differentiate: those that train this step, in the module's order."""
     return [p for p in motion.parameters() if p.requires_grad]
 
 
 class Draws(NamedTuple):
-    """What `side_loss` needs besides the model: each loss's draws, None when it is off."""
+    """What `loss_and_gradients` needs besides the model: each loss's draws, None when it is off."""
 
     physics: PhysicsDraw | None
     carry: CarryDraw | None
@@ -96,32 +95,33 @@ class Draws(NamedTuple):
         return any(d is not None for d in self)
 
 
-def draw(loop, it, spec):
-    """The side losses' draws of iteration `it` (velogauss.train.loop._Loop `loop`, the spec
-    of the step), in the order the losses are summed: physics, carry, mixing."""
-    cfg, model = loop.cfg, loop.model
+def draw(cfg, model, spec, it, rng, bounds, window, device):
+    """The auxiliary losses' draws of iteration `it`, in the order the losses are summed:
+    physics, carry, mixing. cfg: the run's Config; model: the VeloGaussModel; spec: the step's
+    MotionSpec; rng: the run's NumPy Generator; bounds: the scene's box (lo (3,), hi (3,));
+    window: the latest time the curriculum draws at `it` (FrameSampler.window); device: where
+    the drawn tensors go."""
     motion_on = spec.moving and it >= cfg.train.warmup
     physics = carry = mixing = None
     if motion_on and spec.physics_loss:
         p = cfg.physics
         ramp = min(1.0, (it - cfg.train.warmup + 1) / max(1, p.ramp))
-        # Drawn under either placement: it gives t, and the box points drawn first keep every
-        # recorded run's random stream (near the Gaussians they are then not used).
-        x, t = collocation_points(loop.data.bounds, p.bounds_margin, p.n_points, loop.rng, torch.float32, loop.device)
-        physics = PhysicsDraw(ramp, t, x, None, None)
         if p.placement == "gaussians" and bool(model.moving.any()):  # else the box: nothing to be near
+            t = collocation_time(rng)
             moving = torch.nonzero(model.moving).squeeze(1)
-            lo, hi = (np.asarray(b, dtype=np.float64) for b in loop.data.bounds)
-            index, offsets = draw_near(len(moving), p.n_points, p.jitter * float(np.linalg.norm(hi - lo)), loop.rng,
-                                       model.gaussians.means.dtype, loop.device)
+            lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+            index, offsets = draw_near(len(moving), p.n_points, p.jitter * float(np.linalg.norm(hi - lo)), rng,
+                                       model.gaussians.means.dtype, device)
             physics = PhysicsDraw(ramp, t, None, moving.index_select(0, index), offsets)
+        else:
+            x, t = collocation_points(bounds, p.bounds_margin, p.n_points, rng, torch.float32, device)
+            physics = PhysicsDraw(ramp, t, x, None, None)
     if motion_on and spec.carry_loss and cfg.train.lambda_carry > 0:
-        window = loop.sampler.window(it)
-        t = float(loop.rng.uniform(0.0, window))
-        t_a = float(np.clip(t + loop.rng.uniform(-cfg.train.carry_horizon, cfg.train.carry_horizon), 0.0, window))
-        carry = CarryDraw(t_a, t, draw_moving(model, cfg.train.carry_points, loop.rng))
+        t = float(rng.uniform(0.0, window))
+        t_a = float(np.clip(t + rng.uniform(-cfg.train.carry_horizon, cfg.train.carry_horizon), 0.0, window))
+        carry = CarryDraw(t_a, t, draw_moving(model, cfg.train.carry_points, rng))
     if motion_on and spec.velocity == "affine" and cfg.train.lambda_mix > 0:
-        mixing = draw_moving(model, cfg.train.mix_points, loop.rng)
+        mixing = draw_moving(model, cfg.train.mix_points, rng)
     return Draws(physics, carry, mixing)
 
 
@@ -134,9 +134,9 @@ def draw_moving(model, count, rng):
     return idx
 
 
-def side_loss(canon, leaves, cfg, params, spec, draws):
-    """(loss (0-d, detached), [(motion parameter, its gradient or None)]) of the drawn side
-    losses: ramp · VG-LOSS-PHYS + lambda_carry · VG-LOSS-CARRY + VG-LOSS-MIX (the mixing
+def loss_and_gradients(canon, leaves, cfg, params, spec, draws):
+    """(loss (0-d, detached), [(motion parameter, its gradient or None)]) of the drawn
+    auxiliary losses: ramp · VG-LOSS-PHYS + lambda_carry · VG-LOSS-CARRY + VG-LOSS-MIX (the mixing
     weight is inside `mixing_entropy_loss`). canon: the model's `Canonical`; leaves: the
     motion parameters to differentiate (`motion_leaves`); `params`: the step's motion
     parameter dict, built from them."""
@@ -167,21 +167,21 @@ def collocation_near(canon, draw, params, spec):
 
 
 def start(model, cfg, params, spec, draws, worker):
-    """Start the side losses of `draws` (`side_loss`): a pending result for `finish`, or None
-    when nothing was drawn. In `worker` (a velogauss.train.side_process.SideProcess, when
-    the run's thread budget allows two parallel parts: velogauss.train.loop.prepare), else
+    """Start the auxiliary losses of `draws` (`loss_and_gradients`): a pending result for
+    `finish`, or None when nothing was drawn. In `worker` (a velogauss.train.aux_worker.AuxWorker,
+    when the run's thread budget allows two parallel parts: velogauss.train.loop.prepare), else
     inline when it is None."""
     if not draws.any:
         return None
     if worker is not None:
         return worker.submit(model.motion, canonical(model), cfg, spec, draws)
-    return _Done(side_loss(canonical(model), motion_leaves(model.motion), cfg, params, spec, draws))
+    return _Done(loss_and_gradients(canonical(model), motion_leaves(model.motion), cfg, params, spec, draws))
 
 
 def finish(pending):
-    """Wait for `start`'s side losses and add their gradients to the motion parameters' (the
+    """Wait for `start`'s auxiliary losses and add their gradients to the motion parameters' (the
     renders' backward has run); returns their loss as a float, 0.0 when none ran. Re-raises
-    what the side losses raised."""
+    what the auxiliary losses raised."""
     if pending is None:
         return 0.0
     loss, grads = pending.result()
@@ -192,7 +192,7 @@ def finish(pending):
 
 
 class _Done(NamedTuple):
-    """The side losses computed inline: `start`'s pending result, already there."""
+    """The auxiliary losses computed inline: `start`'s pending result, already there."""
 
     value: tuple
 
