@@ -23,7 +23,7 @@ from typing import List, Optional
 import typer
 
 from velogauss.bench.commands import bench_app
-from velogauss.config import EFFECTS, Ablation
+from velogauss.config import EFFECTS, Ablation, describe
 from velogauss.diagnose.commands import diagnose_app
 from velogauss.errors import user_errors
 from velogauss.io_utils import check_writable
@@ -49,7 +49,8 @@ EXIT_INTERRUPTED = 130  # the shell's code for a process ended by SIGINT
 SPLIT_CHOICES = {"interp": ("interpolation",), "extrap": ("extrapolation",), "both": ("interpolation", "extrapolation")}
 
 _CONFIG_HELP = "TOML config file; its values override the defaults."
-_SET_HELP = "Override one config value, KEY=VALUE (e.g. train.iterations=300); repeatable; wins over --config."
+_SET_HELP = ("Override one config value, KEY=VALUE (e.g. train.iterations=300); repeatable; wins over --config; "
+             "`velogauss config` lists the keys.")
 _DEVICE_HELP = "Torch device: cpu, cuda, cuda:1 ... (default: the run's config)."
 _LPIPS_HELP = ("Folder with the LPIPS weights alex.npz and vgg.npz (default: $VELOGAUSS_LPIPS_DIR, "
                "then ../shared/data/lpips beside the checkout, then the standard download).")
@@ -261,6 +262,18 @@ def export_command(
 
 
 # --- the commands of their own packages -----------------------------------------------
+
+@app.command("config")
+def config_command(
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help=_CONFIG_HELP),
+    set_: List[str] = typer.Option([], "--set", "-s", help=_SET_HELP),
+):
+    """Every config key with its value (the defaults, then --config and --set) and why it has it."""
+    with user_errors():
+        cfg = build_config(config, set_)
+    for key, value, description in describe(cfg):
+        typer.echo(f"{key} = {value!r}\n    {description}")
+
 
 app.command("sweep")(sweep_command)
 app.command("view")(view_command)

@@ -5,7 +5,7 @@ at `path` (if any), then each override `section.key=value` (the value is read as
 value; a bare word is taken as a string), then the command-line `flags` (typed values), and
 validates the result with pydantic: each field's type and range (`Field(ge=..., ...)`) is
 written next to it below (the motion networks' sizes, `model.n_patterns` ...
-`model.n_freqs_adf_t`, in `velogauss_core.motion.MotionSizes`, shared with `MotionConfig`),
+`model.n_freqs_adf_t`, in `velogauss_core.motion.NetworkSizes`, shared with `MotionSpec`),
 and is checked before any training. Unknown sections or keys and values of the wrong type or
 out of range raise ValueError naming the key and where the value came from (the file, `--set`
 or the flag). `to_toml(cfg)` writes a config back (tomli-w); `velogauss train` saves it as
@@ -30,7 +30,7 @@ from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
 from pydantic.dataclasses import dataclass
 
 from velogauss_core.motion import (ABLATIONS, EFFECTS, INTEGRATORS, AccelerationForm, Ablation, Effect, Integrator,
-                                   MotionSizes, PatternForm, Scheme)
+                                   NetworkSizes, PatternForm, Scheme)
 from velogauss_core.rendering import RasterizeMode
 
 
@@ -52,7 +52,8 @@ Rate = _float(gt=0.0)
 Rate0 = _float(ge=0.0)
 Count = _int(ge=1)
 Every = _int(ge=0)  # an interval in iterations; 0 disables
-_STRICT = ConfigDict(extra="forbid")
+# Each field's docstring is its description (`describe`, `velogauss config`): what, and why this default.
+_STRICT = ConfigDict(extra="forbid", use_attribute_docstrings=True)
 Placement = Literal["box", "gaussians"]  # where VG-LOSS-PHYS's collocation points are drawn
 # A schedule key: a number of iterations, or "auto", its share of train.iterations in
 # SCHEDULE (resolve_schedule). Intervals (`Period`) are at least 1 iteration when "auto".
@@ -60,14 +61,27 @@ Span = Union[Literal["auto"], _int(ge=0)]
 Period = Union[Literal["auto"], Every]
 
 
+# data.split's "future:F": F a decimal strictly inside (0, 1) ("0.8", ".8"), so 0, 1 and above never parse.
+FutureSplit = Annotated[str, Field(strict=True, pattern=r"^future:0?\.[0-9]*[1-9][0-9]*$")]
+
+
 @dataclass(frozen=True, config=_STRICT)
 class DataConfig:
     """Which scene and how it is loaded (velogauss.data.load_scene)."""
 
-    dir: str = ""  # the scene folder; recorded by `velogauss train`
-    max_time: _float(gt=0.0, lt=1.0) = 0.75  # end of the observed window; later frames are the future to predict
-    half_res: Flag = False  # load the images at half resolution (quick looks)
-    background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)  # RGB behind the Gaussians and under RGBA images (white)
+    dir: str = ""
+    """The scene folder; recorded by `velogauss train`"""
+    max_time: _float(gt=0.0, lt=1.0) = 0.75
+    """End of the observed window; later frames are the future to predict. Under a "future:F" split it is
+    derived (the last trained frame's time) and recorded so; a value other than 0.75 that differs is an error."""
+    split: Union[Literal["time"], FutureSplit] = "time"
+    """How frames split into train and future: "time" at max_time, each file's role kept (the default, the layout's
+    own split); "future:F" (ODE-GS's D-NeRF protocol) sorts the train and test frames by time and trains on the
+    first round(F n), max_time then being the last one's time (spec/data.md, "Splits")."""
+    half_res: Flag = False
+    """Load the images at half resolution (quick looks)"""
+    background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)
+    """RGB behind the Gaussians and under RGBA images (white)"""
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -75,138 +89,183 @@ class _ModelChoices:
     """The first keys of `ModelConfig`, a base of it only so that config.toml lists them
     before the networks' sizes (a dataclass's inherited fields come first, base by base)."""
 
-    # Effects the motion may use; "auto": the scene's declared ones (scene.json), else all but oscillation.
     effects: Union[Literal["auto"], Annotated[tuple[Effect, ...], Field(min_length=1)]] = "auto"
-    # The divergence loss (VG-DIV) on or off; "auto": scene.json's `incompressible`, else on.
+    """Effects the motion may use; "auto": the scene's declared ones (scene.json), else all but oscillation."""
     incompressible: Union[Literal["auto"], Flag] = "auto"
-    # The acceleration's time form: "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or "auto" (rigid for rigid
-    # effects); "poly", as "rigid" helped one rigid scene and hurt another (benchmarks/FIDELITY.md, section 6).
+    """The divergence loss (VG-DIV) on or off; "auto": scene.json's `incompressible`, else on."""
     acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
-    # The motion patterns' time form: "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or
-    # "auto": the form the scene's effects call for, which extrapolates best (FIDELITY.md, section 1).
+    """The acceleration's time form: "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or "auto" (rigid for rigid
+    effects); "poly", as "rigid" helped one rigid scene and hurt another (benchmarks/FIDELITY.md, section
+    6)."""
     patterns: Union[Literal["auto"], PatternForm] = "auto"
-    # How the mixing weights start: "uniform", "clusters" (one k-means region per pattern, velogauss.train.mixing)
-    # or "auto": clusters only beside a static body, as they cost a single body (FIDELITY.md, section 0b).
+    """The motion patterns' time form: "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or
+    "auto": the form the scene's effects call for, which extrapolates best (FIDELITY.md, section 1)."""
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
-    # Rigid patterns' centres: "hull", anchored on the moving Gaussians' hull centroid (velogauss.train.centres),
-    # or "auto": hull for one body on a parabola, where learned ones drift off it, else learned (section 0a).
+    """How the mixing weights start: "uniform", "clusters" (one k-means region per pattern,
+    velogauss.train.mixing) or "auto": clusters only beside a static body, as they cost a single body
+    (FIDELITY.md, section 0b)."""
     rigid_centre: Literal["auto", "hull"] = "auto"
-    ablation: Ablation = "full"  # the paper's ablations (velogauss.model.spec); "full" keeps PDS, ADF and GPC
-    sh_degree: _int(ge=0, le=3) = 1  # spherical-harmonics degree of the colours (VG-SH is written up to 3)
+    """Rigid patterns' centres: "hull", anchored on the moving Gaussians' hull centroid
+    (velogauss.train.centres), or "auto": hull for one body on a parabola, where learned ones drift off it,
+    else learned (section 0a)."""
+    ablation: Ablation = "full"
+    """The paper's ablations (velogauss.model.spec); "full" keeps PDS, ADF and GPC"""
+    sh_degree: _int(ge=0, le=3) = 1
+    """Spherical-harmonics degree of the colours (VG-SH is written up to 3)"""
 
 
 @dataclass(frozen=True, config=_STRICT)
-class ModelConfig(MotionSizes, _ModelChoices):
+class ModelConfig(NetworkSizes, _ModelChoices):
     """The representation and the motion model (spec/motion.md, spec/physics.md).
 
     Keys in config.toml's order: `_ModelChoices`'s (effects ... sh_degree), the motion
-    networks' sizes with their defaults and ranges (`MotionSizes`, n_patterns ...
-    n_freqs_adf_t, which `MotionConfig` shares), then the fields below.
+    networks' sizes with their defaults and ranges (`NetworkSizes`, n_patterns ...
+    n_freqs_adf_t, which the resolved `MotionSpec` shares), then the fields below.
     """
 
-    integrator: Integrator = "rk2"  # VG-INTEG's method; RK2, as the paper
-    step: _float(gt=0.0, le=1.0) = 0.05  # largest integration step in normalised time: one frame of 21
-    # Hold the ADF's correction at its value at max_time beyond the window, where it never saw t
-    # (deform-only, a DefGS-style model, evaluates it at every t, as DefGS does).
+    integrator: Integrator = "rk2"
+    """VG-INTEG's method; RK2, as the paper"""
+    step: _float(gt=0.0, le=1.0) = 0.05
+    """Largest integration step in normalised time: one frame of 21"""
     adf_clamp_time: Flag = True
-    # How x(t) comes from the velocity and the ADF: "integrate" (a) from t = 0, or "adf-step" (b), the ADF's
-    # state carried by the velocity (VG-CARRY); (a) extrapolated best (benchmarks/FIDELITY.md).
+    """Hold the ADF's correction at its value at max_time beyond the window, where it never saw t
+    (deform-only, a DefGS-style model, evaluates it at every t, as DefGS does)."""
     scheme: Scheme = "integrate"
-    carry_offset: Unit = 0.05  # scheme "adf-step": |t - t_start| of VG-CARRY in training, one frame, as the authors'
-    init_points: Count = 5000  # random initial Gaussians when the scene has no points3d.ply
-    init_opacity: _float(gt=0.0, lt=1.0) = 0.1  # every Gaussian's initial opacity, as 3DGS's
-    # How splats are filtered (VG-RENDER): "classic", 3DGS's dilation, or "antialiased", Mip-Splatting's 2D
-    # filter, which learned the rate of strain more closely on every scene (FIDELITY.md, section 0c).
+    """How x(t) comes from the velocity and the ADF: "integrate" (a) from t = 0, or "adf-step" (b), the ADF's
+    state carried by the velocity (VG-CARRY); (a) extrapolated best (benchmarks/FIDELITY.md)."""
+    carry_offset: Unit = 0.05
+    """Scheme "adf-step": |t - t_start| of VG-CARRY in training, one frame, as the authors'"""
+    init_points: Count = 5000
+    """Random initial Gaussians when the scene has no points3d.ply"""
+    init_opacity: _float(gt=0.0, lt=1.0) = 0.1
+    """Every Gaussian's initial opacity, as 3DGS's"""
     rasterize_mode: RasterizeMode = "antialiased"
+    """How splats are filtered (VG-RENDER): "classic", 3DGS's dilation, or "antialiased", Mip-Splatting's 2D
+    filter, which learned the rate of strain more closely on every scene (FIDELITY.md, section 0c)."""
 
 
 @dataclass(frozen=True, config=_STRICT)
 class TrainConfig:
     """Optimisation schedule (3DGS-style learning rates, see velogauss.train.optim)."""
 
-    iterations: Count = 3000  # the length of every benchmarked run (SCHEDULE_ITERATIONS)
-    seed: _int(ge=0) = 0  # of NumPy's and torch's generators; NumPy refuses negative seeds
-    device: str = "cpu"  # checked against this machine's devices by the command line
-    # CPU threads of torch and of the compositing kernels; 0: velogauss.threads chooses (one torch thread, one
-    # compositing thread per core), as more threads than cores only wait for each other.
+    iterations: Count = 3000
+    """The length of every benchmarked run (SCHEDULE_ITERATIONS)"""
+    seed: _int(ge=0) = 0
+    """Of NumPy's and torch's generators; NumPy refuses negative seeds"""
+    device: str = "cpu"
+    """Checked against this machine's devices by the command line"""
     threads: _int(ge=0, le=1024) = 0
-    warmup: Span = "auto"  # iterations on the t = 0 frames only, motion frozen ("auto": SCHEDULE's share)
-    curriculum: Span = "auto"  # iterations over which the sampled times open up to max_time
-    # Training views per iteration, all of one time: several cameras pin the positions in depth, which one
-    # view cannot (benchmarks/FIDELITY.md, "Defaults").
+    """CPU threads of torch and of the compositing kernels; 0: velogauss.threads chooses (one torch thread,
+    one compositing thread per core), as more threads than cores only wait for each other."""
+    warmup: Span = "auto"
+    """Iterations on the t = 0 frames only, motion frozen ("auto": SCHEDULE's share)"""
+    curriculum: Span = "auto"
+    """Iterations over which the sampled times open up to max_time"""
     views: _int(ge=1, le=64) = 3
-    lr_means: Rate = 1.6e-4  # times the camera extent, decayed to lr_means_final (3DGS's)
+    """Training views per iteration, all of one time: several cameras pin the positions in depth, which one
+    view cannot (benchmarks/FIDELITY.md, "Defaults")."""
+    lr_means: Rate = 1.6e-4
+    """Times the camera extent, decayed to lr_means_final (3DGS's)"""
     lr_means_final: Rate = 1.6e-6
-    lr_sh: Rate0 = 2.5e-3  # degree-0 coefficients; higher degrees get lr_sh / 20 (3DGS's)
+    """Where lr_means's decay ends, times the camera extent (3DGS's)."""
+    lr_sh: Rate0 = 2.5e-3
+    """Degree-0 coefficients; higher degrees get lr_sh / 20 (3DGS's)"""
     lr_opacity: Rate0 = 0.05
+    """Opacities' rate (3DGS's); 0 freezes them."""
     lr_scales: Rate0 = 5e-3
+    """Log-scales' rate (3DGS's); 0 freezes them."""
     lr_quats: Rate0 = 1e-3
-    lr_motion: Rate = 1e-3  # motion networks, decayed to lr_motion_final
+    """Quaternions' rate (3DGS's); 0 freezes them."""
+    lr_motion: Rate = 1e-3
+    """Motion networks, decayed to lr_motion_final"""
     lr_motion_final: Rate = 1e-4
-    # The "acc" group (Q, rigid patterns, oscillators' coefficients): world quantities, which need a larger
-    # rate than the networks' weights (velogauss.train.optim).
+    """Where lr_motion's decay ends: 10x lower, as 3DGS's position rate falls."""
     lr_acc: Rate = 0.05
-    # Where lr_acc's decay ends: 10x lower, as the networks'; a 100x decay starves short runs (FIDELITY.md, 0d).
+    """The "acc" group (Q, rigid patterns, oscillators' coefficients): world quantities, which need a larger
+    rate than the networks' weights (velogauss.train.optim)."""
     lr_acc_final: Rate = 5e-3
-    # The last fraction of the iterations over which the acc rate falls on to lr_acc_cooled (0: off), so that
-    # the patterns' world quantities stop wandering before training ends (FIDELITY.md, section 0d).
+    """Where lr_acc's decay ends: 10x lower, as the networks'; a 100x decay starves short runs (FIDELITY.md,
+    0d)."""
     acc_cooldown: _float(ge=0.0, lt=1.0) = 0.1
+    """The last fraction of the iterations over which the acc rate falls on to lr_acc_cooled (0: off), so that
+    the patterns' world quantities stop wandering before training ends (FIDELITY.md, section 0d)."""
     lr_acc_cooled: Rate = 5e-4
-    # L2 on the ADF's displacement, so that the velocity, not the ADF, carries the motion (FIDELITY.md, "Defaults").
+    """The "acc" group's rate at the last iteration, reached over acc_cooldown."""
     lambda_adf: _float(ge=0.0) = 10.0
-    # Iteration at which the ADF starts learning; "auto": with the motion under the time network's patterns,
-    # deform-only and "adf-step", else once the curriculum has opened the window (FIDELITY.md, section 0f).
+    """L2 on the ADF's displacement, so that the velocity, not the ADF, carries the motion (FIDELITY.md,
+    "Defaults")."""
     adf_start: Union[Literal["auto"], _int(ge=0)] = "auto"
-    # Scheme "adf-step": weight of VG-LOSS-CARRY (the velocity fitted to the ADF's paths); 0, off, by default.
+    """Iteration at which the ADF starts learning; "auto": with the motion under the time network's patterns,
+    deform-only and "adf-step", else once the curriculum has opened the window (FIDELITY.md, section 0f)."""
     lambda_carry: _float(ge=0.0) = 0.0
-    # VG-LOSS-CARRY: largest |t - t_a| drawn, in normalised time (at most the whole window [0, 1]).
+    """Scheme "adf-step": weight of VG-LOSS-CARRY (the velocity fitted to the ADF's paths); 0, off, by
+    default."""
     carry_horizon: _float(gt=0.0, le=1.0) = 0.25
-    carry_points: Count = 2048  # VG-LOSS-CARRY: moving Gaussians drawn per iteration
-    # VG-LOSS-MIX: weight of the mixing weights' entropy, which makes each particle commit to one motion
-    # pattern, so that bodies moving apart do not share one (FIDELITY.md, section 0).
+    """VG-LOSS-CARRY: largest |t - t_a| drawn, in normalised time (at most the whole window [0, 1])."""
+    carry_points: Count = 2048
+    """VG-LOSS-CARRY: moving Gaussians drawn per iteration"""
     lambda_mix: _float(ge=0.0) = 1e-3
-    mix_points: Count = 2048  # VG-LOSS-MIX: moving Gaussians drawn per iteration
-    motion_only: Flag = False  # after the warm-up only the motion trains (the error budget's optimisation floor)
-    eval_every: Every = 500  # PSNR on the interpolation split -> log.jsonl
-    checkpoint_every: Every = 500  # 0: only at the end (and on Ctrl-C)
+    """VG-LOSS-MIX: weight of the mixing weights' entropy, which makes each particle commit to one motion
+    pattern, so that bodies moving apart do not share one (FIDELITY.md, section 0)."""
+    mix_points: Count = 2048
+    """VG-LOSS-MIX: moving Gaussians drawn per iteration"""
+    motion_only: Flag = False
+    """After the warm-up only the motion trains (the error budget's optimisation floor)"""
+    eval_every: Every = 500
+    """PSNR on the interpolation split -> log.jsonl"""
+    checkpoint_every: Every = 500
+    """0: only at the end (and on Ctrl-C)"""
 
 
 @dataclass(frozen=True, config=_STRICT)
 class PhysicsConfig:
     """Global physical constraints on collocation points (VG-LOSS-PHYS)."""
 
-    # VG-TRANSPORT's weight; "auto": TRANSPORT_WEIGHT, or 0 under oscillating patterns (resolve_transport).
     lambda_transport: Union[Literal["auto"], _float(ge=0.0)] = "auto"
-    # VG-DIV's weight, as the transport's: strong enough to bind the motion, weak enough not to drown the images.
+    """VG-TRANSPORT's weight; "auto": TRANSPORT_WEIGHT, or 0 under oscillating patterns (resolve_transport)."""
     lambda_div: _float(ge=0.0) = 1e-3
-    ramp: Span = "auto"  # iterations over which both weights rise linearly from 0, while the velocity forms
-    n_points: Count = 1024  # collocation points per iteration, at one random time in [0, 1]
-    bounds_margin: _float(ge=0.0) = 0.1  # "box": the scene box grows by this fraction of its size on each side
-    # Where the collocation points lie: "box" uniform in the grown box, or "gaussians" near the moving
-    # Gaussians, where the residual binds the bodies rather than empty space (benchmarks/FIDELITY.md).
+    """VG-DIV's weight, as the transport's: strong enough to bind the motion, weak enough not to drown the
+    images."""
+    ramp: Span = "auto"
+    """Iterations over which both weights rise linearly from 0, while the velocity forms"""
+    n_points: Count = 1024
+    """Collocation points per iteration, at one random time in [0, 1]"""
+    bounds_margin: _float(ge=0.0) = 0.1
+    """"box": the scene box grows by this fraction of its size on each side"""
     placement: Placement = "gaussians"
-    # "gaussians": the normal offsets' standard deviation, a fraction of the box diagonal (0: at the means).
+    """Where the collocation points lie: "box" uniform in the grown box, or "gaussians" near the moving
+    Gaussians, where the residual binds the bodies rather than empty space (benchmarks/FIDELITY.md)."""
     jitter: _float(ge=0.0) = 0.02
+    """"gaussians": the normal offsets' standard deviation, a fraction of the box diagonal (0: at the means)."""
 
 
 @dataclass(frozen=True, config=_STRICT)
 class DensifyConfig:
     """Adaptive density control (3DGS): clone, split, prune, opacity reset."""
 
-    start: Span = "auto"  # first iteration of densification ("auto": SCHEDULE's share)
-    until: Span = "auto"  # last iteration of densification
-    every: Union[Literal["auto"], Count] = "auto"  # iterations between densification rounds
-    # Mean |d loss / d mean2d| in NDC units that clones or splits a Gaussian; stricter than 3DGS's 2e-4, which on
-    # the 64 px synthetic scenes cloned whole objects while the motion was still misfit (FIDELITY.md).
+    start: Span = "auto"
+    """First iteration of densification ("auto": SCHEDULE's share)"""
+    until: Span = "auto"
+    """Last iteration of densification"""
+    every: Union[Literal["auto"], Count] = "auto"
+    """Iterations between densification rounds"""
     grad_threshold: _float(gt=0.0) = 5e-4
-    percent_dense: Unit = 0.01  # clone below, split above this fraction of the camera extent (3DGS's)
-    prune_opacity: _float(ge=0.0, lt=1.0) = 0.005  # prune below this opacity (at 1 every Gaussian would go)
-    opacity_reset_every: Period = "auto"  # iterations between opacity resets (3DGS's floaters' cure)
-    max_gaussians: Count = 10000  # the count densification never exceeds
-    # "fixed": up to max_gaussians at every round; "linear": the cap rises from 0 at `start` to max_gaussians
-    # at `until`, so that a scene does not spend its budget before the motion has settled.
+    """Mean |d loss / d mean2d| in NDC units that clones or splits a Gaussian; stricter than 3DGS's 2e-4,
+    which on the 64 px synthetic scenes cloned whole objects while the motion was still misfit
+    (FIDELITY.md)."""
+    percent_dense: Unit = 0.01
+    """Clone below, split above this fraction of the camera extent (3DGS's)"""
+    prune_opacity: _float(ge=0.0, lt=1.0) = 0.005
+    """Prune below this opacity (at 1 every Gaussian would go)"""
+    opacity_reset_every: Period = "auto"
+    """Iterations between opacity resets (3DGS's floaters' cure)"""
+    max_gaussians: Count = 10000
+    """The count densification never exceeds"""
     cap_schedule: Literal["fixed", "linear"] = "fixed"
-    static_every: Period = "auto"  # iterations between detections of particles that do not move
+    """"fixed": up to max_gaussians at every round; "linear": the cap rises from 0 at `start` to max_gaussians
+    at `until`, so that a scene does not spend its budget before the motion has settled."""
+    static_every: Period = "auto"
+    """Iterations between detections of particles that do not move"""
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -324,6 +383,23 @@ def config_from_dict(tree, source="config"):
         return _ADAPTER.validate_python(tree)
     except ValidationError as err:
         raise ValueError(_describe(err, tree, source)) from None
+
+
+def describe(cfg=None):
+    """Every key of `cfg` (default: the defaults) in config.toml's order, as (`section.key`,
+    value, description): the field's docstring, which says what it is and why this default."""
+    cfg = Config() if cfg is None else cfg
+    return [(f"{section.name}.{field.name}", getattr(getattr(cfg, section.name), field.name),
+             _description(type(getattr(cfg, section.name)), field.name))
+            for section in dataclasses.fields(cfg) for field in dataclasses.fields(getattr(cfg, section.name))]
+
+
+def _description(cls, name):
+    """The description of field `name` of `cls`, read where it is declared (pydantic keeps an
+    attribute docstring on the declaring class only); "" if it has none."""
+    declaring = next((k for k in cls.__mro__ if name in vars(k).get("__annotations__", {})), cls)
+    info = getattr(declaring, "__pydantic_fields__", {}).get(name) or cls.__pydantic_fields__[name]
+    return info.description or ""
 
 
 def to_toml(cfg):

@@ -50,7 +50,7 @@ import torch
 from tqdm.auto import tqdm
 
 from velogauss.io_utils import to_numpy
-from velogauss.scenes.motions import StaticMotion
+from velogauss.scenes.trajectories import StaticMotion
 from velogauss_fast import metrics
 from velogauss_core.constants import ALPHA_MIN, EVAL_SURFACE_MARGIN, EVAL_VELOCITY_FLOOR
 from velogauss_core.lpips_nets import min_image_size, weights_file
@@ -229,8 +229,10 @@ def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth
 
     `splits`: a subset of `SPLITS`; the freeze baseline comes with "extrapolation".
     `ground_truth`: the synthetic scene's `AnalyticScene` for the motion metrics, or None.
-    Returns a JSON-ready dict: `max_time`, `lpips` (where the weights came from, or why LPIPS
-    was skipped: `lpips_status`), `splits` (per split, see `evaluate_split`),
+    Returns a JSON-ready dict: `max_time`, `split` (the scene's data.split), `lpips` (where the
+    weights came from, or why LPIPS was skipped: `lpips_status`), `splits` (per split, see
+    `evaluate_split`; an empty one, as interpolation may be under "future:F", has count 0 and
+    None means: absent, not an error),
     `freeze_baseline` (or None), `motion` (`velocity`, `trajectory`, or None).
     Raises ValueError naming `splits` for an unknown split.
     """
@@ -240,8 +242,8 @@ def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth
     with_lpips, note = lpips_status(lpips_weights)
     if not with_lpips:
         tqdm.write(f"LPIPS {note}")
-    result = {"max_time": float(scene.max_time), "lpips": note, "splits": {}, "freeze_baseline": None,
-              "motion": None}
+    result = {"max_time": float(scene.max_time), "split": scene.split, "lpips": note, "splits": {},
+              "freeze_baseline": None, "motion": None}
     for name in splits:
         frames = getattr(scene, name)
         result["splits"][name] = evaluate_split(model, frames, scene.background, lpips_weights, progress, name,
@@ -261,9 +263,13 @@ def summary_markdown(result):
     t = result["max_time"]
     lines = ["| split | frames | PSNR ↑ | SSIM ↑ | LPIPS (alex) ↓ | LPIPS (vgg) ↓ |",
              "|---|---:|---:|---:|---:|---:|"]
-    labels = {"interpolation": f"interpolation (t ≤ {t:g})", "extrapolation": f"extrapolation (t > {t:g})"}
+    split_rule = result.get("split", "time")
+    # Under "future:F" the cut is by count, so a future frame may share the window's end time.
+    future = f"extrapolation (t > {t:g})" if split_rule == "time" else f"extrapolation ({split_rule}, t ≥ {t:g})"
+    labels = {"interpolation": f"interpolation (t ≤ {t:g})", "extrapolation": future}
     for name, split in result["splits"].items():
-        lines.append(_metric_row(labels[name], split["count"], split["mean"]))
+        label = labels[name] if split["count"] else f"{labels[name]}: no frames in this split"
+        lines.append(_metric_row(label, split["count"], split["mean"]))
     if result["freeze_baseline"] is not None:
         base = result["freeze_baseline"]
         lines.append(_metric_row(f"extrapolation, baseline: last observed frame frozen (t = {t:g})",
@@ -290,7 +296,7 @@ def metrics_markdown(result, title="Metrics"):
     """The whole `metrics.md`: headline tables (`summary_markdown`), how the numbers are
     defined, and a per-frame table of each split."""
     parts = [f"# {title}", ""]
-    for key in ("run", "data", "lpips"):
+    for key in ("run", "data", "split", "lpips"):
         if result.get(key):
             parts.append(f"- {key}: `{result[key]}`")
     parts += ["", summary_markdown(result), "## Definitions", "", _DEFINITIONS.strip(), ""]
@@ -300,6 +306,8 @@ def metrics_markdown(result, title="Metrics"):
         for row in split["frames"]:
             parts.append(f"| {row['path']} | {row['time']:.3f} | " + " | ".join(
                 _fmt(row.get(k), d) for k, d in zip(IMAGE_METRICS, (2, 4, 4, 4))) + " |")
+        if not split["frames"]:
+            parts.append("| (no frames in this split) | | | | | |")
         parts.append("")
     return "\n".join(parts)
 

@@ -178,12 +178,12 @@ def load_run_model(run_dir, device=None):
 
 
 def load_run_scene(cfg, data_dir):
-    """The run's scene, loaded with the run's observed window, resolution and background; DataError
+    """The run's scene, loaded with the run's split, observed window, resolution and background; DataError
     for bad data or images smaller than the SSIM window."""
     from velogauss.data import check_trainable_size, load_scene
 
     scene = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
-                       background=cfg.data.background)
+                       background=cfg.data.background, split=cfg.data.split)
     check_trainable_size(scene)
     return scene
 

@@ -1,18 +1,21 @@
-"""The motion model's configuration and tables (spec/motion.md, "Parameters and configuration").
+"""The motion model's resolved plan and tables (spec/motion.md, "Parameters and configuration").
 
-One frozen `MotionConfig` is shared by `velogauss_ref` and `velogauss_fast`, and one
-`init_motion_params` draws the parameter dict (NumPy arrays; the model converts them to
-tensors). The networks' sizes are declared once, in `MotionSizes`, which both `MotionConfig`
-and the training config's `[model]` section (`velogauss.config.ModelConfig`) inherit. Every
-list of choices is defined here once, as a `Literal` type and the tuple of its values.
+One frozen `MotionSpec`, the resolved plan of a model's motion, is what `velogauss_ref`,
+`velogauss_fast` and the application's motion read; the application resolves it from its
+config (`velogauss.model.spec.resolve_motion_spec`). One `init_motion_params` draws the
+parameter dict (NumPy arrays; the model converts them to tensors). The networks' sizes are
+declared once, as the fields of `NetworkSizes`, which both `MotionSpec` and the training
+config's `[model]` section (`velogauss.config.ModelConfig`) inherit. Every list of choices is
+defined here once, as a `Literal` type and the tuple of its values.
 """
 
+import dataclasses
 from dataclasses import dataclass, fields
 from typing import Annotated, Literal, get_args
 
 import numpy as np
 from annotated_types import Interval
-from pydantic import Strict
+from pydantic import Field, Strict
 
 from velogauss_core.checks import check_scalar
 from velogauss_core.constants import ACC_HARMONICS, ACC_POLY_DEGREE, HARMONIC_CYCLES_INIT, RIGID_OMEGA_INIT
@@ -57,13 +60,13 @@ Scheme = Literal["integrate", "adf-step"]
 # integrate from the canonical state at t = 0 (VG-TRAJ), then add the ADF residual
 # (VG-ADF-COMPOSE), the paper's scheme. "adf-step" (b): the ADF's own state at a start time
 # carried to t by the velocity (VG-CARRY), the authors' released code. Defined here, not in
-# velogauss.model.spec, because the config (which velogauss.model imports) types a key with it.
+# velogauss.model.spec, because the config and `MotionSpec` type a key with it.
 
 AccelerationForm = Literal["poly", "rigid"]
 # How the acceleration of each motion pattern depends on time (spec/physics.md): "poly" a
 # polynomial of degree ACC_POLY_DEGREE in t per basis column (VG-ACC), "rigid" a body spinning
 # at a constant rate whose centre falls under a constant acceleration (VG-ACC-RIGID). These
-# are the config's choices; MotionConfig also takes "harmonic" (VG-ACC-HARM), which the
+# are the config's choices; MotionSpec also takes "harmonic" (VG-ACC-HARM), which the
 # harmonic patterns bring with them, as it needs their frequencies.
 ACC_FORMS: tuple[str, ...] = (*get_args(AccelerationForm), "harmonic")
 
@@ -89,46 +92,50 @@ VELOCITY_KINDS: tuple[str, ...] = get_args(VelocityKind)
 def _int_in(low, high=None):
     """An integer in [low, high] (no upper bound when `high` is None), bools, floats and strings
     refused: pydantic enforces both markers on the config's `[model]` keys, and
-    `MotionConfig.__post_init__` reads the `Interval` back for a config built directly."""
+    `MotionSpec.__post_init__` reads the `Interval` back for a spec built directly."""
     return Annotated[int, Strict(), Interval(ge=low, le=high)]
 
 
 _Size = _int_in(1)
+
+
+def _about(text):
+    """A size's description: pydantic reads it where the config inherits the field."""
+    return Field(description=text)
+
 # Positional-encoding frequencies 2^0 ... 2^(n-1): beyond 2^16 float32 sin(2^k x) is noise.
 _Freqs = _int_in(0, 16)
 
 
 @dataclass(frozen=True)
-class MotionSizes:
-    """Sizes of the motion networks (spec/motion.md), with their defaults and ranges, declared
-    once: `MotionConfig` and `velogauss.config.ModelConfig` (keys `model.n_patterns`, ...,
-    in this order in config.toml) inherit them.
+class NetworkSizes:
+    """The fields of the motion networks' sizes (spec/motion.md), with their defaults and
+    ranges, declared once: `MotionSpec` and `velogauss.config.ModelConfig` (keys
+    `model.n_patterns`, ..., in this order in config.toml) inherit them; nothing builds one alone.
 
-    n_patterns: K motion patterns (VG-COEF; 32 is the paper's ablation value);
-    code_dim: L, the physics code size (VG-CODE);
-    hidden, depth: width and number of hidden layers of every MLP;
-    n_freqs_x: frequencies of gamma(x0) for the code encoder E (VG-CODE);
-    n_freqs_t: frequencies of gamma(t) for the time network (VG-COEF; 0 = raw t, which
-      extrapolates without periodicity);
-    n_freqs_adf_x, n_freqs_adf_t: frequencies of the ADF inputs (VG-ADF).
+    Each size's description is pydantic's, which `velogauss config` prints.
     """
 
-    n_patterns: _Size = 32
-    code_dim: _Size = 16
-    hidden: _Size = 64
-    depth: _Size = 3
-    n_freqs_x: _Freqs = 4
-    n_freqs_t: _Freqs = 0
-    n_freqs_adf_x: _Freqs = 6
-    n_freqs_adf_t: _Freqs = 6
+    n_patterns: Annotated[_Size, _about("K, the motion patterns of VG-COEF; 32, the paper's ablation value")] = 32
+    code_dim: Annotated[_Size, _about("L, the physics code's size (VG-CODE)")] = 16
+    hidden: Annotated[_Size, _about("Width of every MLP's hidden layers")] = 64
+    depth: Annotated[_Size, _about("Hidden layers of every MLP")] = 3
+    n_freqs_x: Annotated[_Freqs, _about("Frequencies of gamma(x0) for the code encoder E (VG-CODE)")] = 4
+    n_freqs_t: Annotated[_Freqs, _about("Frequencies of gamma(t) for the time network (VG-COEF); 0, raw t, which "
+                                        "extrapolates without imposing a period")] = 0
+    n_freqs_adf_x: Annotated[_Freqs, _about("Frequencies of the ADF's position input (VG-ADF)")] = 6
+    n_freqs_adf_t: Annotated[_Freqs, _about("Frequencies of the ADF's time input (VG-ADF)")] = 6
 
 
 @dataclass(frozen=True)
-class MotionConfig(MotionSizes):
-    """The networks' sizes (`MotionSizes`) and the basis-column masks (spec/motion.md).
+class MotionSpec(NetworkSizes):
+    """What the motion of one model computes, resolved once from the config, the scene's
+    effects and the ablation (`velogauss.model.spec.resolve_motion_spec`); the pure functions
+    of `velogauss_ref`, `velogauss_fast` and `velogauss.model.motion` read only this.
 
-    mask: None or 12 bools, the velocity's basis columns (VG-BASIS order);
-    acc_mask: None or 12 bools, the acceleration's columns (VG-ACC);
+    The networks' sizes (`NetworkSizes`), then:
+    mask: None (every column) or 12 bools, the velocity's basis columns (VG-BASIS order);
+    acc_mask: None (every column) or 12 bools, the acceleration's columns (VG-ACC);
     acc_form: the acceleration's time dependence, "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or
       "harmonic" (VG-ACC-HARM, only with harmonic patterns, whose frequencies it uses);
     pattern_form: the motion patterns' time dependence, "mlp" (VG-COEF), "rigid"
@@ -136,9 +143,35 @@ class MotionConfig(MotionSizes):
     max_time: the end of the observed window in normalised time, in (0, 1], where
       VG-COEF-RIGID's last knot sits;
     rigid_knots: VG-COEF-RIGID's knots per centre, evenly spaced over [0, max_time]: 3 (a
-      centre under a constant acceleration) or 2 (a centre drifting uniformly).
-    Masks are stored as tuples of bools so the config stays hashable and serialisable.
-    Raises ValueError naming the field for a size outside its range (`MotionSizes`), a mask
+      centre under a constant acceleration) or 2 (a centre drifting uniformly);
+    effects: the scene's resolved effects (`Effect`, in canonical order);
+    moving: the scene moves at all (False: a static scene, no motion parameters, every
+      switch below is then off);
+    scheme: how positions come from the velocity (`Scheme`); "adf-step" only where there is
+      a velocity and an ADF (it carries the ADF's state);
+    velocity: "affine" (PDS: Phi(x) w(t, z) over `mask`, VG-VEL), "mlp" (no-pds) or None
+      (deform-only: x* = x0);
+    acceleration: the acceleration (`acc_form`) is a parameter (else Q = 0);
+    integrator, step: VG-INTEG's method and largest step in normalised time;
+    adf: the ADF residual is built and applied (VG-ADF);
+    adf_clamp_time: the ADF's input time is min(t, this), or None (evaluated at every t);
+    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a
+      velocity, scheme "integrate"; under "adf-step" x = x*, the penalty would be 0);
+    physics_loss: the VG-LOSS-PHYS transport residual on collocation points is on (GPC);
+    divergence: the VG-DIV term of the physics loss is on (incompressible motion);
+    carry_until: scheme "adf-step": the end of the ADF's window (max_time), where beyond it
+      the velocity alone carries the ADF's state (VG-CARRY); None for "integrate";
+    carry_offset: scheme "adf-step": |t - t_start| of VG-CARRY in training (0 otherwise);
+    carry_loss: VG-LOSS-CARRY (the affine velocity fitted to the ADF's paths) can be on:
+      scheme "adf-step" with the affine velocity; its weight is train.lambda_carry;
+    query_code: where a material point that is not a Gaussian takes its mixing weights:
+      "gaussians" from its nearest Gaussians' (VG-FIELD-GAUSS) under the affine velocity,
+      "network" elsewhere (the velocity MLP of no-pds reads the point itself).
+    The defaults are the plan of the default config for a scene that declares nothing, over
+    the whole window (tests/app/test_profile.py pins it), so a spec built directly for the
+    pure functions names only what it changes. Masks and effects are tuples so the spec stays
+    hashable and serialisable.
+    Raises ValueError naming the field for a size outside its range (`NetworkSizes`), a mask
     that is not 12 bools, an unknown `acc_form` or `pattern_form`, a max_time outside (0, 1]
     or rigid_knots other than 2 or 3, and a harmonic acceleration without harmonic patterns.
     """
@@ -149,9 +182,25 @@ class MotionConfig(MotionSizes):
     pattern_form: PatternForm = "mlp"
     max_time: float = 1.0
     rigid_knots: int = 3
+    effects: tuple[str, ...] = UNDECLARED_EFFECTS
+    moving: bool = True
+    scheme: Scheme = "integrate"
+    velocity: VelocityKind | None = "affine"
+    acceleration: bool = True
+    integrator: Integrator = "rk2"
+    step: float = 0.05
+    adf: bool = True
+    adf_clamp_time: float | None = 1.0
+    adf_loss: bool = True
+    physics_loss: bool = True
+    divergence: bool = True
+    carry_until: float | None = None
+    carry_offset: float = 0.0
+    carry_loss: bool = False
+    query_code: QueryCode = "gaussians"
 
     def __post_init__(self):
-        for field in fields(MotionSizes):
+        for field in fields(NetworkSizes):
             (bounds,) = (m for m in field.type.__metadata__ if isinstance(m, Interval))
             _check_int(field.name, getattr(self, field.name), bounds.ge, bounds.le)
         for name in ("mask", "acc_mask"):
@@ -170,8 +219,32 @@ class MotionConfig(MotionSizes):
         if self.rigid_knots not in (2, 3) or isinstance(self.rigid_knots, bool):
             raise ValueError(f"rigid_knots: expected 2 or 3, got {self.rigid_knots!r}")
 
+    @property
+    def rigid_patterns(self) -> bool:
+        """The affine velocity's motion patterns are VG-COEF-RIGID's rigid bodies (`params["time"]`
+        is their B, a (K, 3 + 3 n) tensor)."""
+        return self.velocity == "affine" and self.pattern_form == "rigid"
 
-def network_shapes(cfg: MotionConfig) -> dict[str, tuple[int, int]]:
+    def without_adf(self) -> "MotionSpec":
+        """This spec with the ADF skipped: what training runs before the ADF starts learning
+        (its last layer is still zero then, so skipping it is exactly the identity). Scheme
+        "adf-step" carries the ADF's state, so without the ADF it is "integrate"."""
+        return dataclasses.replace(self, adf=False, scheme="integrate", carry_until=None, carry_offset=0.0,
+                                   carry_loss=False)
+
+
+def spec_from_dict(values: dict) -> MotionSpec:
+    """Inverse of `dataclasses.asdict(spec)` (lists back to tuples): checkpoints store the spec.
+    ValueError naming the first missing or unknown field: a default must not stand in for a
+    saved value."""
+    names = [f.name for f in fields(MotionSpec)]
+    for name in [*names, *values]:
+        if (name in names) != (name in values):
+            raise ValueError(f"{name}: {'missing from' if name in names else 'not a field of'} the saved MotionSpec")
+    return MotionSpec(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def network_shapes(cfg: MotionSpec) -> dict[str, tuple[int, int]]:
     """(d_in, d_out) of each MLP of the parameter dict, by key; every MLP has `cfg.depth`
     hidden layers of width `cfg.hidden`. "code" E (VG-CODE), "time" P(t) (VG-COEF), "adf" F
     (VG-ADF) and "velocity_mlp", the unconstrained velocity v(gamma(x), t) of "no-pds"."""
@@ -185,7 +258,7 @@ def network_shapes(cfg: MotionConfig) -> dict[str, tuple[int, int]]:
 
 
 def init_motion_params(rng, cfg):
-    """A fresh parameter dict for `cfg` (`MotionConfig`), drawn from the NumPy Generator `rng`.
+    """A fresh parameter dict for `cfg` (`MotionSpec`), drawn from the NumPy Generator `rng`.
 
     Layout (all float64 arrays; MLPs are lists of (W (d_in, d_out), b (d_out,)), sizes from
     `network_shapes`):

@@ -10,22 +10,21 @@ import torch
 
 from velogauss.config import ModelConfig
 from velogauss.model.motion import MotionParameters, gaussians_at
-from velogauss.model.profile import resolve_profile
 from velogauss.model.spec import resolve_motion_spec
 from velogauss.train import adf_backward_thread
 from velogauss.train.adf_backward_thread import AdfBackwardJob, adf_evaluation
 
 # Rotation and stretch move q and s too, so every output of the ADF and of the integration
 # carries a gradient; the rigid and oscillating patterns have time parameters of their own.
-PROFILES = {"mlp": resolve_profile(("translation", "rotation", "stretch"), False),
-            "rigid": resolve_profile(("translation", "rotation"), False, patterns="rigid"),
-            "harmonic": resolve_profile(("stretch", "oscillation"), False, patterns="harmonic"),
-            "translation": resolve_profile(("translation",), False, patterns="mlp")}
+SCENES = {"mlp": dict(effects=("translation", "rotation", "stretch"), incompressible=False),
+          "rigid": dict(effects=("translation", "rotation"), incompressible=False, patterns="rigid"),
+          "harmonic": dict(effects=("stretch", "oscillation"), incompressible=False, patterns="harmonic"),
+          "translation": dict(effects=("translation",), incompressible=False, patterns="mlp")}
 SMALL = dict(n_freqs_x=2, n_freqs_adf_x=2, n_freqs_adf_t=1, code_dim=4, n_patterns=4, hidden=16, depth=2)
 
 
 def _setup(ablation, dtype, frozen=(), canonical_grad=True, patterns="mlp", n=64):
-    spec = resolve_motion_spec(ModelConfig(ablation=ablation, **SMALL), PROFILES[patterns], 0.75)
+    spec = resolve_motion_spec(ModelConfig(ablation=ablation, **SCENES[patterns], **SMALL), None, 0.75)
     motion = MotionParameters(spec, np.random.default_rng(0)).to(dtype)
     g = torch.Generator().manual_seed(1)
     with torch.no_grad():  # away from the still start (the ADF's last layer is zero there)
@@ -62,7 +61,7 @@ def _gradients(spec, motion, canonical, weights, adf):
 ])
 def test_the_adf_in_its_thread_gives_the_single_backwards_numbers(dtype, patterns, frozen, canonical_grad):
     spec, motion, canonical, weights = _setup("full", dtype, frozen, canonical_grad, patterns)
-    assert spec.adf and spec.config.pattern_form == ("mlp" if patterns == "translation" else patterns)
+    assert spec.adf and spec.pattern_form == ("mlp" if patterns == "translation" else patterns)
     assert adf_evaluation(spec) is adf_backward_thread.start_in_thread
     out_one, grads_one = _gradients(spec, motion, canonical, weights, adf=None)
     out_two, grads_two = _gradients(spec, motion, canonical, weights, adf=adf_evaluation(spec))

@@ -12,7 +12,7 @@ from velogauss.bench import accuracy
 from velogauss.scenes.catalog import SCENES
 from velogauss_fast.motion.coefficients import coefficients
 from velogauss_fast.motion.params import params_to_torch
-from velogauss_core.motion import MotionConfig
+from velogauss_core.motion import MotionSpec
 
 # Ratio of the errors at h and h / 2, per method: 2^p (1 + O(h)). The step sizes of QUICK
 # keep |omega| h <= 0.2, where the next term of the error expansion moves the ratio by a
@@ -68,7 +68,7 @@ def test_parameters_reproduce_the_scene_coefficients():
     # The motion parameters give every particle the body's exact coefficients at every t
     # (the scene code computes those, independently of the motion model): checked through
     # the fast VG-COEF, float64, against RigidMotion.basis_coefficients.
-    cfg = MotionConfig(mask=(True,) * 6 + (False,) * 6)
+    cfg = MotionSpec(mask=(True,) * 6 + (False,) * 6)
     for case in accuracy.cases():
         w0, w1 = accuracy.affine_in_time(case.motion)
         params = params_to_torch(accuracy.linear_in_time_params(cfg, w0, w1, np.random.default_rng(0)),

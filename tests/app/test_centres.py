@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import torch
 
-from velogauss.config import load_config
+from velogauss.config import ModelConfig, load_config
 from velogauss.data import load_scene
-from velogauss.model import build_model, scene_profile
-from velogauss.model.profile import resolve_profile
+from velogauss.model import build_model, scene_spec
+from velogauss.model.spec import resolve_motion_spec
 from velogauss.scenes import make_scene
 from velogauss.train import loop
 from velogauss.train.centres import anchor_centres, hull_centroid, resolve_rigid_centre
@@ -23,7 +23,7 @@ def _toss(tmp_path):
 
 def _model(data, overrides=()):
     cfg = load_config(None, [*TINY, *overrides])
-    return build_model(cfg, scene_profile(cfg, data.metadata), data.points, data.point_colors,
+    return build_model(cfg, scene_spec(cfg, data.metadata), data.points, data.point_colors,
                        np.random.default_rng(0))
 
 
@@ -83,10 +83,13 @@ def test_anchoring_refuses_moving_patterns_and_other_forms(tmp_path):
 
 
 def test_auto_anchors_rigid_patterns_of_one_body():
-    toss = resolve_profile(("translation", "rotation", "gravity"), True, patterns="auto")
-    spin = resolve_profile(("translation", "rotation"), True, patterns="auto")
-    multi = resolve_profile(("translation", "rotation", "gravity", "static"), True, patterns="auto")
-    stretch = resolve_profile(("stretch",), True, patterns="auto")
+    def spec(*effects):
+        return resolve_motion_spec(ModelConfig(effects=effects, incompressible=True, patterns="auto"), None, 1.0)
+
+    toss = spec("translation", "rotation", "gravity")
+    spin = spec("translation", "rotation")
+    multi = spec("translation", "rotation", "gravity", "static")
+    stretch = spec("stretch")
     assert resolve_rigid_centre("auto", toss, "auto") == "hull"
     assert resolve_rigid_centre("auto", spin, "auto") == "learned"  # a centre on a line (2 knots)
     assert resolve_rigid_centre("hull", spin, "auto") == "hull"

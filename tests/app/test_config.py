@@ -4,9 +4,9 @@ import dataclasses
 
 import pytest
 
-from velogauss.config import (Config, ModelConfig, load_config, resolve_from_run, resolve_schedule, resolve_transport,
-                              to_toml)
-from velogauss_core.motion import MotionConfig, MotionSizes
+from velogauss.config import (Config, ModelConfig, describe, load_config, resolve_from_run, resolve_schedule,
+                              resolve_transport, to_toml)
+from velogauss_core.motion import MotionSpec, NetworkSizes
 
 
 def test_defaults_without_file_or_overrides():
@@ -133,10 +133,10 @@ def test_bad_file_is_named(tmp_path):
 
 
 def test_motion_sizes_are_declared_once():
-    # The networks' sizes, their defaults and ranges live in MotionSizes alone (issue 9):
-    # the [model] keys and MotionConfig carry its very fields, in its order.
-    sizes = dataclasses.fields(MotionSizes)
-    for cls in (ModelConfig, MotionConfig):
+    # The networks' sizes, their defaults and ranges live in NetworkSizes alone: the [model]
+    # keys and the resolved MotionSpec carry its very fields, in its order.
+    sizes = dataclasses.fields(NetworkSizes)
+    for cls in (ModelConfig, MotionSpec):
         fields = {f.name: f for f in dataclasses.fields(cls)}
         assert [fields[f.name].type for f in sizes] == [f.type for f in sizes]
         assert [fields[f.name].default for f in sizes] == [f.default for f in sizes]
@@ -148,7 +148,31 @@ def test_motion_sizes_are_declared_once():
 @pytest.mark.parametrize("override", ["model.n_freqs_x=17", "model.n_freqs_x=-1", "model.n_freqs_x=true",
                                       "model.hidden=0", "model.depth=2.0"])
 def test_motion_size_out_of_range_is_named(override):
-    # The ranges MotionSizes declares reach the config's validation, with the key and its source.
+    # The ranges NetworkSizes declares reach the config's validation, with the key and its source.
     key = override.partition("=")[0]
     with pytest.raises(ValueError, match=f"^--set: {key.replace('.', '[.]')}: "):
         load_config(None, [override])
+
+
+def test_every_key_says_what_it_is_and_why():
+    # The descriptions are the fields' docstrings, which `velogauss config` prints.
+    rows = describe()
+    keys = [f"{section.name}.{field.name}" for section in dataclasses.fields(Config)
+            for field in dataclasses.fields(getattr(Config(), section.name))]
+    assert [key for key, _, _ in rows] == keys
+    assert [key for key, _, text in rows if len(text.split()) < 3] == []
+    assert dict((key, value) for key, value, _ in rows)["train.views"] == Config().train.views
+
+
+def test_velogauss_config_lists_keys_with_the_overrides_applied():
+    from typer.testing import CliRunner
+
+    from velogauss.cli import app
+
+    result = CliRunner().invoke(app, ["config", "--set", "train.iterations=7"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    at = lines.index("train.iterations = 7")
+    assert lines[at + 1].strip() == dict((k, d) for k, _, d in describe())["train.iterations"]
+    bad = CliRunner().invoke(app, ["config", "--set", "train.nope=1"])
+    assert bad.exit_code == 2 and "train.nope" in bad.output

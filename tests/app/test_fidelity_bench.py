@@ -10,10 +10,10 @@ from velogauss.diagnose.centre import centre_errors, centre_motion, reference_of
 from velogauss.bench.fidelity import VARIANTS, acceleration_scores, pareto_front, pareto_plot, run_one
 from velogauss.config import load_config
 from velogauss.data import load_scene
-from velogauss.model import build_model, scene_profile
+from velogauss.model import build_model, scene_spec
 from velogauss.scenes import load_ground_truth, make_scene
 from velogauss.scenes.bodies import Body, Texture
-from velogauss.scenes.motions import RigidMotion
+from velogauss.scenes.trajectories import RigidMotion
 from velogauss.scenes.scene import AnalyticScene
 
 
@@ -47,7 +47,7 @@ def test_acceleration_scores_against_a_thrown_box(tmp_path):
     make_scene("toss", tmp_path / "toss", resolution=16, n_views=2, n_times=3, n_points=50, n_heldout=1)
     scene = load_scene(tmp_path / "toss")
     cfg = load_config(None, ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2"])
-    model = build_model(cfg, scene_profile(cfg, scene.metadata), scene.points, scene.point_colors,
+    model = build_model(cfg, scene_spec(cfg, scene.metadata), scene.points, scene.point_colors,
                         np.random.default_rng(0))
     box = Body("box", "box", centre=(0.0, 0.0, 0.0), size=(0.4, 0.3, 0.2), rotation=np.eye(3),
                texture=Texture("checker", ((1, 0, 0), (0, 0, 1))),
@@ -71,7 +71,7 @@ def _small_toss_model(tmp_path, overrides=()):
     data = load_scene(tmp_path / "toss")
     cfg = load_config(None, ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2",
                              *overrides])
-    model = build_model(cfg, scene_profile(cfg, data.metadata), data.points, data.point_colors,
+    model = build_model(cfg, scene_spec(cfg, data.metadata), data.points, data.point_colors,
                         np.random.default_rng(0))
     return model, load_ground_truth(tmp_path / "toss")
 
@@ -81,7 +81,7 @@ def _thrown_box_with_rigid_patterns(tmp_path):
     box's own spin and its centre at the knots: the true motion."""
     model, scene = _small_toss_model(tmp_path)
     (box,) = scene.bodies
-    T = model.spec.config.max_time
+    T = model.spec.max_time
     knots = [scene.position(box.centre[None], tau, margin=np.inf)[0] for tau in (0.0, T / 2, T)]
     with torch.no_grad():
         model.motion.time.copy_(torch.as_tensor(np.concatenate([box.motion.omega, *knots]), dtype=torch.float32))
@@ -92,7 +92,7 @@ def test_centre_errors_of_a_thrown_spinning_box(tmp_path):
     """The true rigid patterns give the box's centre its velocity exactly at every time, in
     the window and past it; a still model is wrong by the whole velocity."""
     model, scene = _thrown_box_with_rigid_patterns(tmp_path)
-    T = model.spec.config.max_time
+    T = model.spec.max_time
     times = (0.0, T / 3, T, 1.0)
     rows = centre_errors(model, scene, times)["box"]
     assert [t for t, _, _ in rows] == pytest.approx(times)
@@ -110,7 +110,7 @@ def test_centre_motion_of_a_thrown_spinning_box(tmp_path):
     still model gives zero for each, against the same truth."""
     model, scene = _thrown_box_with_rigid_patterns(tmp_path)
     (box,) = scene.bodies
-    T = model.spec.config.max_time
+    T = model.spec.max_time
     motion = centre_motion(model, scene, T)["box"]
     assert set(motion) == {"spin", "acc_window", "acc_future"}
     gravity = np.array([0.0, 0.0, -8.0])

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from velogauss.config import load_config
-from velogauss.model import build_model
-from velogauss.model.profile import resolve_profile
+from velogauss.model import build_model, scene_spec
 from velogauss.train.frequency import candidate_frequencies, start_frequency, video_frequency
 from velogauss_core.constants import FREQ_SCAN_STEP
 
@@ -67,8 +66,8 @@ def test_candidates_span_the_scan_in_cycles_over_the_window():
 
 def _model(effects, patterns="auto"):
     cfg = load_config(None, [f"model.patterns={patterns}", f"data.max_time={WINDOW}"])
-    profile = resolve_profile(effects, True, patterns=patterns)
-    return build_model(cfg, profile, np.random.default_rng(0).standard_normal((20, 3)), None,
+    spec = scene_spec(cfg, {"effects": list(effects), "incompressible": True})
+    return build_model(cfg, spec, np.random.default_rng(0).standard_normal((20, 3)), None,
                        np.random.default_rng(0))
 
 

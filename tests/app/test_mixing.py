@@ -7,7 +7,6 @@ import torch
 from velogauss.config import ModelConfig, load_config
 from velogauss.data import load_scene
 from velogauss.model.motion import MotionParameters
-from velogauss.model.profile import resolve_profile
 from velogauss.model.spec import resolve_motion_spec
 from velogauss.scenes import make_scene
 from velogauss.train import loop
@@ -16,7 +15,7 @@ from velogauss_core.constants import MIXING_INIT_WEIGHT
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_weights
 
-RIGID = resolve_profile(("translation", "rotation"), False, patterns="mlp")
+RIGID = dict(effects=("translation", "rotation"), incompressible=False, patterns="mlp")  # `[model]` keys
 CENTRES = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.5], [0.0, 0.0, -1.0]])
 
 
@@ -29,7 +28,7 @@ def _blobs(per_blob=50, spread=0.05, seed=0):
 
 def _weights(motion, x):
     params = motion.params()
-    return mixing_weights(params, physics_code(params, x, motion.spec.config))
+    return mixing_weights(params, physics_code(params, x, motion.spec))
 
 
 def test_kmeans_finds_separated_blobs():
@@ -43,8 +42,8 @@ def test_kmeans_finds_separated_blobs():
 
 @pytest.mark.spec("VG-COEF")
 def test_each_region_starts_on_its_own_pattern():
-    spec = resolve_motion_spec(ModelConfig(n_patterns=4, code_dim=4, hidden=16, depth=1, n_freqs_x=1),
-                               RIGID, 0.75)
+    spec = resolve_motion_spec(ModelConfig(n_patterns=4, code_dim=4, hidden=16, depth=1, n_freqs_x=1, **RIGID),
+                               None, 0.75)
     motion = MotionParameters(spec, np.random.default_rng(0))
     points, blob = _blobs()
     x = torch.tensor(points, dtype=torch.float32)
@@ -82,11 +81,14 @@ def test_training_starts_from_the_clusters(tmp_path):
 
 
 def test_auto_separates_the_patterns_where_a_still_body_sits_beside_moving_ones():
-    multi = resolve_profile(("translation", "rotation", "static"), True)
+    def spec(**keys):
+        return resolve_motion_spec(ModelConfig(**keys), None, 0.75)
+
+    multi, rigid = spec(effects=("translation", "rotation", "static")), spec(**RIGID)
     assert resolve_mixing_init("auto", multi) == "clusters"
-    assert resolve_mixing_init("auto", RIGID) == "uniform"  # one body: nothing to tell apart
-    assert resolve_mixing_init("auto", resolve_profile(("static",), False)) == "uniform"  # nothing moves
-    assert resolve_mixing_init("clusters", RIGID) == "clusters" and resolve_mixing_init("uniform", multi) == "uniform"
+    assert resolve_mixing_init("auto", rigid) == "uniform"  # one body: nothing to tell apart
+    assert resolve_mixing_init("auto", spec(effects=("static",))) == "uniform"  # nothing moves
+    assert resolve_mixing_init("clusters", rigid) == "clusters" and resolve_mixing_init("uniform", multi) == "uniform"
 
 
 def test_a_bad_mixing_init_names_the_key():

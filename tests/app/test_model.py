@@ -8,22 +8,21 @@ from velogauss.config import ModelConfig
 from velogauss.model.velogauss_model import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
 from velogauss.model.motion import MotionParameters, gaussians_at, motion_residuals, velocity_at
-from velogauss.model.profile import resolve_profile
 from velogauss.model.spec import ABLATION_SWITCHES, resolve_motion_spec
 from velogauss_core.motion import ABLATIONS
 
-# The time network's patterns (VG-COEF) throughout, whatever the effects.
-RIGID = resolve_profile(("translation", "rotation"), False, patterns="mlp")
-INCOMPRESSIBLE = resolve_profile(("translation", "rotation"), True, patterns="mlp")
-GRAVITY = resolve_profile(("translation", "gravity"), False, patterns="mlp")
-STATIC = resolve_profile(("static",), False, patterns="mlp")
-# Uniform translation: Dv/Dt = 0, so no acceleration polynomial (velogauss.model.profile).
-DRIFT = resolve_profile(("translation",), False, patterns="mlp")
+# Scenes as `[model]` keys, with the time network's patterns (VG-COEF) throughout, whatever the effects.
+RIGID = dict(effects=("translation", "rotation"), incompressible=False, patterns="mlp")
+INCOMPRESSIBLE = dict(effects=("translation", "rotation"), incompressible=True, patterns="mlp")
+GRAVITY = dict(effects=("translation", "gravity"), incompressible=False, patterns="mlp")
+STATIC = dict(effects=("static",), incompressible=False, patterns="mlp")
+# Uniform translation: Dv/Dt = 0, so no acceleration polynomial (velogauss.model.spec).
+DRIFT = dict(effects=("translation",), incompressible=False, patterns="mlp")
 SMALL = dict(n_freqs_x=1, n_freqs_adf_x=1, n_freqs_adf_t=1, code_dim=3, n_patterns=4, hidden=8, depth=1)
 
 
-def _spec(ablation="full", profile=RIGID, **overrides):
-    return resolve_motion_spec(ModelConfig(ablation=ablation, **{**SMALL, **overrides}), profile, 0.75)
+def _spec(ablation="full", scene=RIGID, **overrides):
+    return resolve_motion_spec(ModelConfig(ablation=ablation, **{**scene, **SMALL, **overrides}), None, 0.75)
 
 
 def _canonical(n=16, seed=0):
@@ -48,10 +47,10 @@ def test_each_ablation_resolves_to_its_row_of_the_table(ablation, velocity, adf,
     assert (spec.scheme, spec.moving, spec.velocity, spec.adf, spec.physics_loss) == (
         "integrate", True, velocity, adf, physics)
     assert spec.adf_loss == (adf and velocity is not None)
-    assert spec.divergence == physics  # the profile is incompressible: on wherever GPC is
+    assert spec.divergence == physics  # the scene is incompressible: on wherever GPC is
     # deform-only is DefGS-style: its ADF sees every t; the others hold it at max_time.
     assert spec.adf_clamp_time == (None if ablation == "deform-only" else 0.75)
-    assert spec.config.mask == INCOMPRESSIBLE.mask and spec.config.code_dim == SMALL["code_dim"]
+    assert spec.mask == (True,) * 6 + (False,) * 6 and spec.code_dim == SMALL["code_dim"]
 
 
 def test_every_ablation_has_exactly_one_row():

@@ -9,9 +9,8 @@ import pytest
 import torch
 
 from velogauss.config import Config, ModelConfig, TrainConfig
-from velogauss.model import build_model
+from velogauss.model import build_model, scene_spec
 from velogauss.model.gaussians import FIELDS
-from velogauss.model.profile import resolve_profile
 from velogauss.train.optim import make_optimizer, set_learning_rates, update_gaussian_groups
 
 SMALL = dict(n_freqs_x=1, n_freqs_adf_x=1, n_freqs_adf_t=1, code_dim=3, n_patterns=4, hidden=8, depth=1)
@@ -22,8 +21,8 @@ EXTENT = 2.5
 def _model(effects=("translation", "gravity"), **model):
     cfg = Config(model=ModelConfig(**SMALL, **model))
     points = np.random.default_rng(0).uniform(-1, 1, (20, 3))
-    profile = resolve_profile(effects, False, patterns=cfg.model.patterns)
-    return build_model(cfg, profile, points, None, np.random.default_rng(0))
+    spec = scene_spec(cfg, {"effects": list(effects), "incompressible": False})
+    return build_model(cfg, spec, points, None, np.random.default_rng(0))
 
 
 def test_every_parameter_is_in_exactly_one_named_group():

@@ -8,7 +8,7 @@ import pytest
 from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.scenes import DEFAULT_SCENE, EFFECTS, SCENES, load_ground_truth, make_scene
 from velogauss.scenes.bodies import Body, Texture
-from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
+from velogauss.scenes.trajectories import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
 from velogauss.scenes.raycast import cast_rays, intersect_primitive, shade, world_normal
 from velogauss.scenes.scene import AnalyticScene
 

@@ -15,7 +15,7 @@ import torch
 from velogauss import io_utils
 from velogauss.config import SCHEDULE, DensifyConfig, load_config, resolve_schedule, resolve_transport
 from velogauss.data import load_scene
-from velogauss.model import build_model, scene_profile
+from velogauss.model import build_model, scene_spec
 from velogauss.model import motion as motion_fns
 from velogauss.scenes import make_scene
 from velogauss.train import loop
@@ -109,8 +109,8 @@ MLP_PATTERNS = ["model.patterns=mlp"]
 
 def _model(tiny_scene, overrides=()):
     cfg = load_config(None, TINY + list(overrides))
-    profile = scene_profile(cfg, tiny_scene.metadata)
-    return cfg, build_model(cfg, profile, tiny_scene.points, tiny_scene.point_colors, np.random.default_rng(0))
+    spec = scene_spec(cfg, tiny_scene.metadata)
+    return cfg, build_model(cfg, spec, tiny_scene.points, tiny_scene.point_colors, np.random.default_rng(0))
 
 
 def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
@@ -353,7 +353,7 @@ def test_particle_velocity_keeps_the_start_code(tiny_scene):
         moved = motion_fns.particle_velocity(params, spec, x0, x, 0.4)
         field = motion_fns.velocity_at(params, spec, x, 0.4)
         assert (moved - field).abs().max() > 1e-3
-        cfg_m = spec.config
+        cfg_m = spec
         w = velocity_coefficients(params, 0.4, physics_code(params, x0, cfg_m), cfg_m)
         assert torch.allclose(moved, affine_velocity(x, w), atol=1e-6)
 
@@ -369,7 +369,7 @@ def test_velocity_between_the_gaussians(tiny_scene):
     with torch.no_grad():
         last = model.motion.time[-1]
         last.copy_(torch.randn(last.shape, generator=torch.Generator().manual_seed(0)))
-        params, cfg_m = model.motion.params(), model.spec.config
+        params, cfg_m = model.motion.params(), model.spec
         mu = model.gaussians.means
         own = affine_velocity(mu, velocity_coefficients(params, 0.4, physics_code(params, mu, cfg_m), cfg_m))
         torch.testing.assert_close(model.particle_velocity(mu, mu, 0.4), own, rtol=1e-4, atol=1e-5)
@@ -409,13 +409,13 @@ def test_adf_step_scheme_renders_the_adf_inside_the_window_and_the_velocity_beyo
             p.add_(0.05 * torch.randn_like(p))
     params = model.motion.params()
     x0, q0, s0 = model.gaussians.means, torch.nn.functional.normalize(model.gaussians.quats, dim=1), model.gaussians.scales
-    z = physics_code(params, x0, spec.config)
+    z = physics_code(params, x0, spec)
 
     def adf_state(t):
-        return compose_state(x0, q0, s0, *adf_residual(params, x0, t, z, spec.config))
+        return compose_state(x0, q0, s0, *adf_residual(params, x0, t, z, spec))
 
     def step(state, t0, t):
-        return base_state(params, *state, z, t, spec.step, spec.integrator, spec.config, t0=t0)
+        return base_state(params, *state, z, t, spec.step, spec.integrator, spec, t0=t0)
 
     with torch.no_grad():
         inside = model.state_at(0.5)[0]

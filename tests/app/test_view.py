@@ -27,7 +27,7 @@ pytest.importorskip("viser", reason="viser is not installed (pip install 'veloga
 from velogauss.cli import app  # noqa: E402
 from velogauss.config import load_config  # noqa: E402
 from velogauss.data import load_scene  # noqa: E402
-from velogauss.model import build_model, scene_profile  # noqa: E402
+from velogauss.model import build_model, scene_spec  # noqa: E402
 from velogauss.scenes import make_scene  # noqa: E402
 from velogauss.train import loop  # noqa: E402
 from velogauss.view.frame import (BANNER_HEIGHT, FUTURE_COLOR, OBSERVED_COLOR, FrameRenderer, annotate,  # noqa: E402
@@ -52,7 +52,7 @@ def model(tiny_scene):
     """An untrained model whose zero-initialised heads (ADF, time network) are perturbed, so
     that the full model and its physics-only base state differ."""
     cfg = load_config(None, TINY)
-    model = build_model(cfg, scene_profile(cfg, tiny_scene.metadata), tiny_scene.points,
+    model = build_model(cfg, scene_spec(cfg, tiny_scene.metadata), tiny_scene.points,
                         tiny_scene.point_colors, np.random.default_rng(0))
     gen = torch.Generator().manual_seed(0)
     with torch.no_grad():

@@ -9,7 +9,7 @@ from velogauss.data.dnerf import Frame
 from velogauss.diagnose.visibility import seen_points, split_velocity_errors
 from velogauss.evaluate import moving_surface_points
 from velogauss.scenes.bodies import Body, Texture
-from velogauss.scenes.motions import RigidMotion, StaticMotion
+from velogauss.scenes.trajectories import RigidMotion, StaticMotion
 from velogauss.scenes.scene import AnalyticScene
 
 PLAIN = Texture("checker", ((1, 0, 0), (0, 0, 1)))

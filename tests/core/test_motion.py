@@ -1,22 +1,22 @@
-"""velogauss_core.motion: `MotionConfig` validates a config built directly, with the ranges
-its sizes take from `MotionSizes` (spec/motion.md, "Parameters and configuration")."""
+"""velogauss_core.motion: `MotionSpec` validates a spec built directly, with the ranges
+its sizes take from `NetworkSizes` (spec/motion.md, "Parameters and configuration")."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from velogauss_core.motion import MotionConfig, MotionSizes, init_motion_params
+from velogauss_core.motion import MotionSpec, NetworkSizes, init_motion_params
 
 
-def test_sizes_come_first_then_masks():
-    names = [f.name for f in dataclasses.fields(MotionConfig)]
-    assert names == [f.name for f in dataclasses.fields(MotionSizes)] + ["mask", "acc_mask", "acc_form", "pattern_form", "max_time",
-                                                                   "rigid_knots"]
+def test_sizes_come_first_then_what_the_equations_read():
+    names = [f.name for f in dataclasses.fields(MotionSpec)]
+    sizes = [f.name for f in dataclasses.fields(NetworkSizes)]
+    assert names[:len(sizes) + 6] == sizes + ["mask", "acc_mask", "acc_form", "pattern_form", "max_time", "rigid_knots"]
 
 
 @pytest.mark.parametrize("sizes, message", [
-    ({"n_freqs_x": 17}, r"n_freqs_x: expected an integer in \[0, 16\], got 17"),  # above MotionSizes' bound
+    ({"n_freqs_x": 17}, r"n_freqs_x: expected an integer in \[0, 16\], got 17"),  # above NetworkSizes' bound
     ({"n_freqs_adf_t": -1}, r"n_freqs_adf_t: expected an integer in \[0, 16\], got -1"),
     ({"hidden": 0}, r"hidden: expected an integer >= 1, got 0"),
     ({"depth": True}, r"depth: expected an integer >= 1, got True"),  # a bool is not a size
@@ -32,18 +32,18 @@ def test_sizes_come_first_then_masks():
 ])
 def test_bad_values_are_named(sizes, message):
     with pytest.raises(ValueError, match=message):
-        MotionConfig(**sizes)
+        MotionSpec(**sizes)
 
 
 def test_bounds_and_numpy_integers_are_accepted():
-    cfg = MotionConfig(n_freqs_x=16, n_freqs_t=0, hidden=np.int64(1))
+    cfg = MotionSpec(n_freqs_x=16, n_freqs_t=0, hidden=np.int64(1))
     assert (cfg.n_freqs_x, cfg.n_freqs_t, cfg.hidden) == (16, 0, 1)
 
 
 def test_frozen_and_hashable():
-    cfg = MotionConfig(mask=np.ones(12, dtype=bool))
-    assert cfg.mask == (True,) * 12  # stored as a tuple, so the config hashes
-    assert hash(cfg) == hash(MotionConfig(mask=(True,) * 12))
+    cfg = MotionSpec(mask=np.ones(12, dtype=bool))
+    assert cfg.mask == (True,) * 12  # stored as a tuple, so the spec hashes
+    assert hash(cfg) == hash(MotionSpec(mask=(True,) * 12))
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.hidden = 8
 
@@ -51,7 +51,7 @@ def test_frozen_and_hashable():
 def test_harmonic_patterns_start_still_at_one_cycle():
     # VG-COEF-HARM: zero coefficients (a still scene) and one shared frequency, one cycle over
     # the window (training then sets the video's); the acceleration's harmonics start at zero.
-    cfg = MotionConfig(n_patterns=4, pattern_form="harmonic", acc_form="harmonic", max_time=0.5)
+    cfg = MotionSpec(n_patterns=4, pattern_form="harmonic", acc_form="harmonic", max_time=0.5)
     params = init_motion_params(np.random.default_rng(0), cfg)
     [(C, omega)], Q = params["time"], params["acc"]
     assert C.shape == (3, 4, 12) and np.all(C == 0) and Q.shape == (5, 4, 12) and np.all(Q == 0)

@@ -21,7 +21,7 @@ parameters built so that every particle's coefficients are exactly the body's
 Exact solutions: positions from `RigidMotion.position`, orientations R(omega t) R(q0).
 Errors are measured in float64, so they are the integrators' own; the times are those of
 float32, the training dtype (whose rounding floor is shown too). The column mask is each
-scene's effect profile (`velogauss.model.profile`): translation + rotation for both.
+scene's effects (`velogauss.model.spec`): translation + rotation for both.
 
 Regenerate: velogauss bench accuracy
 Smoke test: velogauss bench accuracy --quick --out /tmp/bench.md
@@ -42,13 +42,13 @@ from velogauss.bench.harness import machine, regenerate_command, timed_passes, w
 from velogauss.bench.motion import leaves
 from velogauss.config import ModelConfig
 from velogauss.io_utils import save_figure
-from velogauss.model.profile import resolve_profile
+from velogauss.model.spec import resolve_motion_spec
 from velogauss.scenes.catalog import SCENES
-from velogauss.scenes.motions import RigidMotion
+from velogauss.scenes.trajectories import RigidMotion
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.params import params_to_torch
 from velogauss_fast.motion.trajectory import base_state
-from velogauss_core.motion import COLUMN_GROUPS, init_motion_params, MotionConfig
+from velogauss_core.motion import COLUMN_GROUPS, init_motion_params, MotionSpec
 
 SECTION = "## Integrator accuracy vs time"
 COMMAND = "velogauss bench accuracy"
@@ -95,7 +95,8 @@ def cases():
             # The spin about the vertical: omega x gravity = 0, so b(t) is affine in t.
             motion = RigidMotion(motion.centre, omega=(0.0, 0.0, float(np.linalg.norm(motion.omega))),
                                  velocity=motion.velocity0, gravity=motion.gravity)
-        mask = resolve_profile(scene.effects, scene.incompressible).mask
+        model_cfg = ModelConfig(effects=tuple(scene.effects), incompressible=scene.incompressible)
+        mask = resolve_motion_spec(model_cfg, None, 1.0).mask
         out.append(Case(name, motion, body.centre, body.size, body.rotation, mask))
     return out
 
@@ -175,12 +176,12 @@ class Problem(NamedTuple):
     q0: torch.Tensor
     s0: torch.Tensor
     z: torch.Tensor
-    cfg: MotionConfig
+    cfg: MotionSpec
 
 
 def problem(case, arrays, dtype, device, requires_grad=False):
     """base_state inputs for `case` from its float64 arrays (params, x0, q0, s0) in `dtype`."""
-    cfg = MotionConfig(mask=case.mask)
+    cfg = MotionSpec(mask=case.mask)
     params_np, x0, q0, s0 = arrays
     params = params_to_torch(params_np, dtype, device, requires_grad)
     x0, q0, s0 = (torch.tensor(a, dtype=dtype, device=device, requires_grad=requires_grad) for a in (x0, q0, s0))
@@ -240,7 +241,7 @@ def measure(sizes, device="cpu", echo=print):
     setups = []
     for case in cases():
         w0, w1 = affine_in_time(case.motion)
-        params = linear_in_time_params(MotionConfig(mask=case.mask), w0, w1, rng)
+        params = linear_in_time_params(MotionSpec(mask=case.mask), w0, w1, rng)
         arrays = (params, *_particles(case, sizes.n_particles, rng))
         exact = exact_state(case.motion, arrays[1], arrays[2], T_END)
         setups.append((case, problem(case, arrays, torch.float64, device), exact, arrays))
@@ -350,7 +351,7 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", quick=False, threads=Non
         f"angle between R(q) and the exact orientation, computed in float64 so they are the integrator's; the "
         f"float32 column is what training's dtype reaches. Times: float32 on {device.upper()}, median of "
         f"{sizes.repeats} runs after one warm-up, forward under no_grad, backward to every motion parameter and "
-        f"x0, q0, s0 (toss's mask: {groups}; `MotionConfig()` sizes). 'order' is log2 of the error ratio "
+        f"x0, q0, s0 (toss's mask: {groups}; `MotionSpec()` sizes). 'order' is log2 of the error ratio "
         f"to the previous h.",
         f"Observed orders (least-squares slope of log position error against log h): {summary}; expected 1, 2, 4. "
         f"Training's default is {DEFAULT[0].upper()} with h = {DEFAULT[1]:g}. Plot: `{PLOT_NAME}`.",

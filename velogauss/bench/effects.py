@@ -10,12 +10,12 @@ acceleration) given small random values, so that every path computes real number
 Per configuration, float32 on the CPU, median of `repeats` passes after a warm-up:
 - motion: `VeloGaussModel.state_at(t)` forward + backward (to every parameter), averaged
   over t = 0.25, 0.5, 0.75 (RK2, h = 0.05: the training defaults);
-- physics: the residuals of VG-TRANSPORT (and VG-DIV when the profile is incompressible)
+- physics: the residuals of VG-TRANSPORT (and VG-DIV when the motion is incompressible)
   at 1024 collocation points, forward + backward.
 Configurations:
 - every effect: what a model that assumes nothing builds (12 basis columns, acceleration on
   all 12, divergence), every particle integrated;
-- the scene's effects: the declared profile (6 columns), every particle integrated;
+- the scene's effects: the declared ones (6 columns), every particle integrated;
 - + static particles frozen: the same with the particles of the static ground marked as not
   moving, as static-particle detection (velogauss.train.static) finds them once trained
   (here taken from the ground truth, so the measurement does not depend on a training run);
@@ -24,6 +24,7 @@ Configurations:
 Regenerate: velogauss bench effects
 """
 
+import dataclasses
 import statistics
 
 import numpy as np
@@ -31,7 +32,7 @@ import torch
 
 from velogauss.bench.harness import machine, regenerate_command, timed_passes, write_section
 from velogauss.config import load_config
-from velogauss.model import build_model, resolve_profile
+from velogauss.model import build_model, scene_spec
 from velogauss.model.motion import motion_residuals
 from velogauss.scenes import SCENES
 
@@ -43,17 +44,19 @@ _HEAD_NOISE = 0.05
 
 
 def build(effects, incompressible, points, colors, seed=0):
-    """A model of the default config with the given effect profile (heads perturbed)."""
+    """A model of the default config with the given effects (heads perturbed)."""
     cfg = load_config()
-    profile = resolve_profile(effects, incompressible, patterns="mlp")  # one pattern form: only the columns differ
-    model = build_model(cfg, profile, points, colors, np.random.default_rng(seed))
+    # One pattern form: only the columns differ.
+    cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, effects=tuple(effects),
+                                                             incompressible=incompressible, patterns="mlp"))
+    model = build_model(cfg, scene_spec(cfg, None), points, colors, np.random.default_rng(seed))
     if model.motion is not None:
         gen = torch.Generator().manual_seed(seed)
         with torch.no_grad():
             for p in model.motion.parameters():
                 if not p.any():  # a zero-initialised head
                     p.add_(_HEAD_NOISE * torch.randn(p.shape, generator=gen))
-    return model, profile
+    return model
 
 
 def time_motion(model, repeats):
@@ -71,7 +74,7 @@ def time_motion(model, repeats):
     return statistics.median(timed_passes(once, repeats)) / len(TIMES)
 
 
-def time_physics(model, profile, bounds, repeats, seed=0):
+def time_physics(model, bounds, repeats, seed=0):
     """Median seconds of the physics residuals forward + backward (0 without motion)."""
     if model.motion is None:
         return 0.0
@@ -109,13 +112,14 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", n_points=5000, repeats=5
     ]
     rows = []
     for name, effects, incompressible, moving in configs:
-        model, profile = build(effects, incompressible, points, colors)
+        model = build(effects, incompressible, points, colors)
+        spec = model.spec
         if moving is not None:
             model.set_moving(torch.as_tensor(moving))
         motion = time_motion(model, repeats)
-        physics = time_physics(model, profile, bounds, repeats)
-        rows.append({"config": name, "columns": profile.n_columns, "acc_columns": sum(profile.acc_mask),
-                     "divergence": profile.divergence, "moving": int(model.moving.sum()) if profile.moving else 0,
+        physics = time_physics(model, bounds, repeats)
+        rows.append({"config": name, "columns": sum(spec.mask), "acc_columns": sum(spec.acc_mask),
+                     "divergence": spec.divergence, "moving": int(model.moving.sum()) if spec.moving else 0,
                      "n": len(model.gaussians), "motion_s": motion, "physics_s": physics})
     _write(out_path, rows, n_points, repeats, quick, threads)
     return rows

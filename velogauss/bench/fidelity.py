@@ -44,7 +44,7 @@ from velogauss.evaluate import (MOTION_EVAL_TIMES, evaluate_split, freeze_baseli
                                 trajectory_error, velocity_error)
 from velogauss.io_utils import write_text
 from velogauss.model import build_model
-from velogauss.model.build import scene_profile
+from velogauss.model.build import scene_spec
 from velogauss.scenes import make_scene
 from velogauss.scenes.catalog import SCENES
 from velogauss.train.optim import make_optimizer
@@ -128,7 +128,7 @@ def acceleration_scores(model, scene, max_time, times=MOTION_EVAL_TIMES):
         norm = np.linalg.norm(truth)
         if norm == 0.0:
             continue
-        learned = acceleration_field(params, torch.as_tensor(x, dtype=torch.float32), t, spec.config).numpy()
+        learned = acceleration_field(params, torch.as_tensor(x, dtype=torch.float32), t, spec).numpy()
         rows["observed" if t <= max_time else "future"].append(float(np.linalg.norm(learned - truth) / norm))
     return {f"acc_{split}": float(np.mean(v)) if v else None for split, v in rows.items()}
 
@@ -139,9 +139,9 @@ def fit_level(name, seed, overrides, all_times, max_time=0.75):
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
     cfg = load_config(None, ["model.ablation=no-adf", *overrides])
-    profile = scene_profile(cfg, {"effects": scene.effects, "incompressible": scene.incompressible})
+    spec = scene_spec(cfg, {"effects": scene.effects, "incompressible": scene.incompressible})
     x0 = moving_surface_points(scene, FIT_POINTS, FIT_SEED)
-    model = build_model(cfg, profile, x0, None, rng)
+    model = build_model(cfg, spec, x0, None, rng)
     times = [float(t) for t in FRAME_TIMES if all_times or t <= max_time + 1e-9]
     targets = [torch.as_tensor(scene.position(x0, t, margin=np.inf), dtype=torch.float32) for t in times]
     # The training's motion groups (velogauss.train.optim), each at FIT_LR times its rate
@@ -167,11 +167,11 @@ def fit_level(name, seed, overrides, all_times, max_time=0.75):
 def _chained_loss(model, x0, q0, s0, times, targets):
     """Mean squared position error at `times`, integrating from each time to the next (VG-STEP)."""
     params, spec = model.motion.params(), model.spec
-    z = physics_code(params, x0, spec.config)
+    z = physics_code(params, x0, spec)
     x, q, s, t_prev, total = x0, q0, s0, 0.0, 0.0
     for t, gt in zip(times, targets):
         if t > t_prev:
-            x, q, s = base_state(params, x, q, s, z, t, spec.step, spec.integrator, spec.config, t0=t_prev)
+            x, q, s = base_state(params, x, q, s, z, t, spec.step, spec.integrator, spec, t0=t_prev)
         total = total + ((x - gt) ** 2).sum(1).mean()
         t_prev = t
     return total / len(times)
@@ -185,7 +185,7 @@ def train_level(name, seed, overrides, cache, tag):
     cfg = load_config(None, [f"train.seed={seed}", "train.eval_every=0", "train.checkpoint_every=0",
                              f"data.dir={data_dir}", *overrides])
     data = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
-                      background=cfg.data.background)
+                      background=cfg.data.background, split=cfg.data.split)
     clock = time.perf_counter()
     model = train(cfg, data, Path(cache) / "runs" / tag, progress=False)
     wall = time.perf_counter() - clock

@@ -17,7 +17,7 @@ returned to the system (malloc_trim), the peak resident set size is reset
 (/proc/self/clear_refs) and `repeats` timed passes follow; memory is the high-water mark
 VmHWM above the resident size at the reset (on CUDA: torch.cuda.max_memory_allocated
 above the allocation at the reset).
-Parameters: `init_motion_params(default_rng(0), MotionConfig())` (the default sizes) plus
+Parameters: `init_motion_params(default_rng(0), MotionSpec())` (the default sizes) plus
 N(0, 0.1^2) on every entry (`_params`): a fresh model does not move.
 
 Regenerate: velogauss bench motion
@@ -43,7 +43,7 @@ from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.motion.velocity import velocity_field
 from velogauss_fast.physics.acceleration import acceleration_field
 from velogauss_fast.physics.residuals import physics_residuals
-from velogauss_core.motion import init_motion_params, MotionConfig
+from velogauss_core.motion import init_motion_params, MotionSpec
 
 SECTION = "## Motion and residuals"
 COMMAND = "velogauss bench motion"
@@ -83,13 +83,13 @@ def reverse_mode_residuals(params, x, t, cfg):
 
 
 def _params(dtype, device, requires_grad):
-    """The default MotionConfig's parameters (seed 0), every entry shifted by N(0, 0.1^2).
+    """The default MotionSpec's parameters (seed 0), every entry shifted by N(0, 0.1^2).
 
     A fresh model starts still: the time network's last layer, Q and the ADF's last layer
     are zero, so velocities, accelerations and residuals are identically 0 and the
     forward-mode/jacrev comparison would be vacuous. The shift makes them all non-zero.
     """
-    cfg = MotionConfig()
+    cfg = MotionSpec()
     rng = np.random.default_rng(0)
     params_np = _shifted(init_motion_params(rng, cfg), rng)
     return params_to_torch(params_np, dtype, device, requires_grad), cfg
@@ -252,8 +252,8 @@ def run(out="benchmarks/RESULTS.md", device="cpu", repeats=5, threads=None, echo
     command = regenerate_command(COMMAND, quick=quick, device=device, threads=threads)
     text = "\n\n".join([
         device_section(SECTION, device),
-        f"{device.upper()}, float32, `MotionConfig()` defaults, parameters "
-        f"`init_motion_params(default_rng(0), MotionConfig())` shifted by N(0, 0.1^2) (so that "
+        f"{device.upper()}, float32, `MotionSpec()` defaults, parameters "
+        f"`init_motion_params(default_rng(0), MotionSpec())` shifted by N(0, 0.1^2) (so that "
         f"velocities and residuals are not identically 0). Trajectory: `physics_code` + "
         f"`base_state` (velocity + RK2, state (x, q, log s)) to t = {T_END} in {sizes.n_steps} steps; "
         f"backward = gradients of all motion parameters and x0, q0, s0 (random cotangent). "

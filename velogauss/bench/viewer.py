@@ -42,7 +42,7 @@ def setup(n_points, seed=0):
 
     scene = SCENES["toss"]()
     points, colors, _ = scene.sample_surface(n_points, np.random.default_rng(seed))
-    model, _ = build(tuple(scene.effects), scene.incompressible, points, colors, seed)
+    model = build(tuple(scene.effects), scene.incompressible, points, colors, seed)
     return FrameRenderer(model, (1.0, 1.0, 1.0)), scene
 
 

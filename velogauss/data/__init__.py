@@ -1,6 +1,6 @@
 """Datasets: cameras in the spec's conventions, the D-NeRF/NVFi loader, point clouds.
 
-`load_scene(path, max_time=0.75, half_res=False, background=(1, 1, 1)) -> SceneData`
+`load_scene(path, max_time=None, half_res=False, background=(1, 1, 1), split="time") -> SceneData`
 validates a whole scene folder up front and raises one `DataError` (a ValueError naming
 the file and field) for bad data; `check_trainable_size(scene)` refuses images smaller
 than the SSIM window before training or evaluation.

@@ -19,15 +19,22 @@ Layout (paths relative to the scene folder):
 - Optional `points3d.ply` (initial point cloud) and `scene.json` (metadata written by
   `velogauss.scenes.writer`; its `bounds` are the scene's box).
 
-Splits by time, with `max_time` the end of the observed window:
-`train` = train frames with `t ≤ max_time`; `interpolation` = val frames with
-`t ≤ max_time`, plus test frames with `t ≤ max_time` whose (pose, time) is not a train
-or val frame's; `extrapolation` = test frames with `t > max_time`. Val and train frames after
-`max_time` are not used (the test file is the designated future set).
+Splits (`split`), with `max_time` the end of the observed window:
+
+- "time" (the default): `train` = train frames with `t ≤ max_time`; `interpolation` = val
+  frames with `t ≤ max_time`, plus test frames with `t ≤ max_time` whose (pose, time) is not a
+  train or val frame's; `extrapolation` = test frames with `t > max_time`. Val and train frames
+  after `max_time` are not used (the test file is the designated future set).
+- "future:F" (ODE-GS's extrapolation protocol on D-NeRF): the train and test frames, train file
+  first, each in file order, are sorted by time (stable, so ties keep that order); the first
+  `n_train = round(F · n)` of the `n` (Python's `round`, half to even) are `train`, the rest
+  `extrapolation`. `max_time` is derived: the last trained frame's time. `interpolation` = val
+  frames with `t ≤ max_time` (possibly none). Val frames after it are not used.
 """
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,6 +48,10 @@ from velogauss.data.ply import read_ply
 from velogauss_core.constants import SSIM_WINDOW
 
 _SPLIT_FILES = {"train": "transforms_train.json", "val": "transforms_val.json", "test": "transforms_test.json"}
+# The observed window's end when none is given; under "future:F" a max_time equal to it counts as not given.
+DEFAULT_MAX_TIME = 0.75
+# `split`'s "future:F", F a decimal strictly inside (0, 1), as velogauss.config's data.split allows.
+_FUTURE_SPLIT = re.compile(r"future:(0?\.[0-9]*[1-9][0-9]*)")
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
@@ -60,7 +71,9 @@ class SceneData:
     """A loaded, validated scene.
 
     `train`, `interpolation`, `extrapolation`: lists of `Frame` (see the module docstring
-    for how they are split). `bounds (2, 3)`: an axis-aligned box `[min, max]` in world
+    for how they are split; `interpolation` may be empty under a "future:F" `split`).
+    `max_time`: the observed window's end (derived under "future:F"); `split`: "time" or
+    "future:F". `bounds (2, 3)`: an axis-aligned box `[min, max]` in world
     units -- `scene.json`'s `bounds` if present, else the box of the `points3d.ply` points,
     else the box the cameras look at (`camera_focus_bounds`). `background (3,)` float32.
     `points (N, 3)` / `point_colors (N, 3)`: the PLY cloud, or None. `metadata`: the parsed
@@ -73,6 +86,7 @@ class SceneData:
     bounds: np.ndarray
     background: np.ndarray
     max_time: float
+    split: str
     points: np.ndarray | None
     point_colors: np.ndarray | None
     metadata: dict | None
@@ -89,10 +103,13 @@ class SceneData:
         return self.train[0].camera.height
 
 
-def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
+def load_scene(path, max_time=None, half_res=False, background=(1.0, 1.0, 1.0), split="time"):
     """Load and validate a D-NeRF/NVFi scene folder into a `SceneData`.
 
-    `path`: the scene folder. `max_time` in (0, 1): end of the observed window.
+    `path`: the scene folder. `split`: "time" or "future:F" (module docstring). `max_time`
+    in (0, 1): end of the observed window; None: DEFAULT_MAX_TIME under "time", derived under
+    "future:F", where a number other than DEFAULT_MAX_TIME must equal the derived end (a
+    run's config.toml records it; anything else would be two windows at once).
     `half_res`: halve the resolution by 2×2 area averaging of the composited images
     (odd trailing rows/columns cropped; `fx, fy, cx, cy` halved). `background (3,)` in
     [0, 1]: colour behind transparent pixels.
@@ -100,11 +117,14 @@ def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
     Every file is read and checked up front; the first problem raises one `DataError`
     naming the file and field: missing file or key, unreadable image, images of different
     sizes or disagreeing with `w`/`h`, non-finite or non-rigid (singular, scaled) pose,
-    time outside [0, 1], an empty `train` or `extrapolation` split (with the times found),
-    a malformed `points3d.ply` or `scene.json`. Bad arguments raise `DataError` naming the
-    argument (a ValueError, like every bad-input error).
+    time outside [0, 1], an empty `train` or `extrapolation` split (with the times found; under
+    "future:F" naming `data.split`, F and the counts), a malformed `points3d.ply` or
+    `scene.json`. Bad arguments raise `DataError` naming the argument (a ValueError, like every
+    bad-input error).
     """
-    max_time = _check_max_time(max_time)
+    fraction = _check_split(split)
+    if max_time is not None or fraction is None:
+        max_time = _check_max_time(DEFAULT_MAX_TIME if max_time is None else max_time)
     background = _check_background(background)
     if not isinstance(half_res, (bool, np.bool_)):
         raise DataError(None, "half_res", f"expected True or False, got {half_res!r}")
@@ -112,34 +132,25 @@ def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
     if not root.is_dir():
         raise DataError(root, "path", "scene folder does not exist")
     records = {}
-    for split, name in _SPLIT_FILES.items():
+    for part, name in _SPLIT_FILES.items():
         file = root / name
         if not file.is_file():
-            if split == "val":
-                records[split] = []
+            if part == "val":
+                records[part] = []
                 continue
             raise DataError(file, "file", f"missing; a scene needs {_SPLIT_FILES['train']} and {_SPLIT_FILES['test']}")
-        records[split] = _read_transforms(file)
-    train = [r for r in records["train"] if r["time"] <= max_time]
-    if not train:
-        raise DataError(root / _SPLIT_FILES["train"], "frames",
-                        f"empty train split: no frame with time <= max_time={max_time} ({_span(records['train'])})")
-    extrapolation = [r for r in records["test"] if r["time"] > max_time]
-    if not extrapolation:
-        raise DataError(root / _SPLIT_FILES["test"], "frames",
-                        f"empty extrapolation split: no frame with time > max_time={max_time} "
-                        f"({_span(records['test'])}); future frames are needed to evaluate extrapolation")
-    interpolation = [r for r in records["val"] if r["time"] <= max_time]
-    # A test frame inside the window that repeats a train or val (pose, time) is no new view.
-    seen = {_pose_time_key(r) for r in train + interpolation}
-    interpolation += [r for r in records["test"] if r["time"] <= max_time and _pose_time_key(r) not in seen]
+        records[part] = _read_transforms(file)
+    if fraction is not None:
+        train, interpolation, extrapolation, max_time = _split_future(root, records, split, fraction, max_time)
+    else:
+        train, interpolation, extrapolation = _split_time(root, records, max_time)
 
     cloud = read_ply(root / "points3d.ply") if (root / "points3d.ply").is_file() else None
     metadata = _read_metadata(root / "scene.json")
 
     size = None
     loaded = {}
-    for split, group in (("train", train), ("interpolation", interpolation), ("extrapolation", extrapolation)):
+    for part, group in (("train", train), ("interpolation", interpolation), ("extrapolation", extrapolation)):
         frames = []
         for record in group:
             image = _load_image(record, background)
@@ -154,7 +165,7 @@ def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
                 image = _halve(image)
                 camera = camera.downsampled(2)
             frames.append(Frame(image, record["time"], camera, str(record["image"])))
-        loaded[split] = frames
+        loaded[part] = frames
 
     if metadata is not None and "bounds" in metadata:
         bounds = metadata["bounds"]
@@ -169,11 +180,54 @@ def load_scene(path, max_time=0.75, half_res=False, background=(1.0, 1.0, 1.0)):
         bounds=np.asarray(bounds, dtype=np.float64),
         background=background,
         max_time=max_time,
+        split=split,
         points=None if cloud is None else cloud.points,
         point_colors=None if cloud is None else cloud.colors,
         metadata=metadata,
         root=root,
     )
+
+
+def _split_time(root, records, max_time):
+    """The "time" split's (train, interpolation, extrapolation) records (module docstring)."""
+    train = [r for r in records["train"] if r["time"] <= max_time]
+    if not train:
+        raise DataError(root / _SPLIT_FILES["train"], "frames",
+                        f"empty train split: no frame with time <= max_time={max_time} ({_span(records['train'])})")
+    extrapolation = [r for r in records["test"] if r["time"] > max_time]
+    if not extrapolation:
+        raise DataError(root / _SPLIT_FILES["test"], "frames",
+                        f"empty extrapolation split: no frame with time > max_time={max_time} "
+                        f"({_span(records['test'])}); future frames are needed to evaluate extrapolation")
+    interpolation = [r for r in records["val"] if r["time"] <= max_time]
+    # A test frame inside the window that repeats a train or val (pose, time) is no new view.
+    seen = {_pose_time_key(r) for r in train + interpolation}
+    interpolation += [r for r in records["test"] if r["time"] <= max_time and _pose_time_key(r) not in seen]
+    return train, interpolation, extrapolation
+
+
+def _split_future(root, records, split, fraction, max_time):
+    """The "future:F" split's (train, interpolation, extrapolation) records and the derived
+    `max_time` (module docstring); DataError naming `data.split` when F leaves a side empty
+    or the window's end outside (0, 1), and `data.max_time` when a given one disagrees."""
+    # sorted() is stable: equal times keep the train file's frames before the test file's.
+    pool = sorted(records["train"] + records["test"], key=lambda r: r["time"])
+    n = len(pool)
+    n_train = round(fraction * n)
+    where = f"{split!r} trains on round({fraction:g} x {n}) = {n_train} of the {n} train and test frames"
+    if n_train == 0 or n_train == n:
+        side = "no train frame" if n_train == 0 else "no future frame to extrapolate to"
+        raise DataError(root, "data.split", f"{where}, which leaves {side}; F must give 1 <= round(F x {n}) <= {n - 1}")
+    end = pool[n_train - 1]["time"]
+    if not 0.0 < end < 1.0:
+        raise DataError(root, "data.split", f"{where}; the last of them is at t = {end:g}, but the observed window "
+                        "[0, t] must end inside (0, 1)")
+    if max_time is not None and max_time != DEFAULT_MAX_TIME and not math.isclose(max_time, end, rel_tol=1e-12):
+        raise DataError(root, "data.max_time", f"{max_time!r} disagrees with data.split {split!r}, whose observed "
+                        f"window ends at the last trained frame's t = {end!r}; leave data.max_time at its default "
+                        f"({DEFAULT_MAX_TIME}) under a future split")
+    interpolation = [r for r in records["val"] if r["time"] <= end]
+    return pool[:n_train], interpolation, pool[n_train:], end
 
 
 def check_trainable_size(scene):
@@ -210,6 +264,14 @@ def _check_max_time(max_time):
         raise DataError(None, "max_time",
                         f"expected a number in (0, 1) so that train and future frames exist, got {max_time!r}")
     return float(max_time)
+
+
+def _check_split(split):
+    """None for "time", F for "future:F"; DataError naming `split` otherwise."""
+    match = _FUTURE_SPLIT.fullmatch(split) if isinstance(split, str) else None
+    if split != "time" and match is None:
+        raise DataError(None, "split", f'expected "time" or "future:F" with F a decimal in (0, 1), got {split!r}')
+    return None if match is None else float(match.group(1))
 
 
 def _check_background(background):

@@ -23,7 +23,7 @@ import torch
 
 from velogauss.evaluate import query
 from velogauss.scenes import load_ground_truth
-from velogauss.scenes.motions import StaticMotion
+from velogauss.scenes.trajectories import StaticMotion
 from velogauss.train.checkpoint import load_model
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_weights
@@ -76,15 +76,14 @@ def reference_offsets(model, scene):
     spec = model.spec
     if not spec.rigid_patterns:
         raise ValueError("model: reference offsets need rigid motion patterns (model.patterns = 'rigid')")
-    cfg = spec.config
-    n = cfg.rigid_knots
-    knot_times = [cfg.max_time * i / (n - 1) for i in range(n)]
+    n = spec.rigid_knots
+    knot_times = [spec.max_time * i / (n - 1) for i in range(n)]
     params = model.motion.params()
     out = {}
     with torch.no_grad():
         for body in _moving_bodies(scene):
             c0 = np.asarray(body.centre, dtype=np.float64)[None]
-            z = physics_code(params, torch.as_tensor(c0, dtype=model.gaussians.means.dtype), cfg)
+            z = physics_code(params, torch.as_tensor(c0, dtype=model.gaussians.means.dtype), spec)
             k = int(mixing_weights(params, z)[0].argmax())
             row = params["time"][k].detach().cpu().numpy().astype(np.float64)
             axis = row[:3] / max(np.linalg.norm(row[:3]), np.finfo(np.float64).tiny)

@@ -85,7 +85,7 @@ def table_rows(run_dir, data_dir=None):
     fmt = lambda v: "—" if v is None else f"{v:.3f}"  # noqa: E731
     model, cfg = load_model(run_dir)
     data_dir = Path(run_dir) / "data" if data_dir is None else Path(data_dir)
-    frames = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res).train
+    frames = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res, split=cfg.data.split).train
     for row in split_velocity_errors(model, load_ground_truth(data_dir), frames, cfg.data.max_time):
         yield (f"| {run_dir} | {row['body']} | {row['part']} | {row['points']} | {fmt(row['observed'])} | "
                f"{fmt(row['future'])} |")

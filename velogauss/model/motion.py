@@ -3,7 +3,7 @@
 `MotionParameters` holds the motion parameter dict of spec/motion.md as trainable
 parameters and does nothing else; `params()` returns the dict, built once per training step.
 Everything the motion computes is a pure function of that dict and the resolved
-`MotionSpec` (velogauss.model.spec), evaluated with `velogauss_fast` (VG-CODE ... VG-DIV):
+`MotionSpec` (velogauss_core.motion), evaluated with `velogauss_fast` (VG-CODE ... VG-DIV):
 
 - `gaussians_at`: the Gaussians at time t (the spec's scheme, then the ADF residual);
 - `carry_loss`: VG-LOSS-CARRY, the velocity fitted to the ADF's paths (scheme "adf-step");
@@ -14,7 +14,7 @@ Everything the motion computes is a pure function of that dict and the resolved
 
 What is built follows the spec: the velocity's time network ("affine", PDS) or the
 unconstrained velocity MLP ("mlp", no-pds) or neither (deform-only); the acceleration
-polynomial Q only when the profile accelerates; the ADF only when the ablation keeps it.
+polynomial Q only when the spec accelerates; the ADF only when the ablation keeps it.
 """
 
 import functools
@@ -23,9 +23,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from velogauss.model.spec import MotionSpec
 from velogauss_core.constants import ACC_POLY_DEGREE
-from velogauss_core.motion import N_BASIS, carry_start, init_motion_params, mlp_layers, network_shapes
+from velogauss_core.motion import N_BASIS, MotionSpec, carry_start, init_motion_params, mlp_layers, network_shapes
 from velogauss_fast.motion import carry
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import coefficients, mixed_coefficients, mixing_weights
@@ -42,7 +41,7 @@ class MotionParameters(nn.Module):
 
     Attributes (each a ParameterList of W, b, W, b, ...): code (VG-CODE), mix (VG-COEF),
     time (VG-COEF, velocity "affine": the time network, VG-COEF-HARM's (C, Omega) under
-    spec.config.pattern_form "harmonic", or VG-COEF-RIGID's B, a Parameter, under "rigid"),
+    spec.pattern_form "harmonic", or VG-COEF-RIGID's B, a Parameter, under "rigid"),
     velocity_mlp (velocity "mlp"), adf (VG-ADF); acc (VG-ACC's or VG-ACC-HARM's Q or
     VG-ACC-RIGID's R, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
     weights (`velogauss_core.motion.init_motion_params`, then the velocity MLP's layers).
@@ -53,8 +52,7 @@ class MotionParameters(nn.Module):
         if not spec.moving:
             raise ValueError("spec: a static scene has no motion parameters (spec.moving is False)")
         self.spec = spec
-        cfg = spec.config
-        params = params_to_torch(init_motion_params(rng, cfg), torch.float32, "cpu")
+        params = params_to_torch(init_motion_params(rng, spec), torch.float32, "cpu")
         self.code = _parameter_list(params["code"])
         self.mix = _parameter_list(params["mix"])
         if spec.rigid_patterns:
@@ -62,9 +60,9 @@ class MotionParameters(nn.Module):
         elif spec.velocity == "affine":
             self.time = _parameter_list(params["time"])
         elif spec.velocity == "mlp":
-            d_in, d_out = network_shapes(cfg)["velocity_mlp"]
+            d_in, d_out = network_shapes(spec)["velocity_mlp"]
             # Last layer zero: a still start, like the affine velocity's time network.
-            layers = mlp_layers(rng, d_in, cfg.hidden, cfg.depth, d_out, zero_last=True)
+            layers = mlp_layers(rng, d_in, spec.hidden, spec.depth, d_out, zero_last=True)
             self.velocity_mlp = _parameter_list(params_to_torch(layers, torch.float32, "cpu"))
         if spec.acceleration:
             self.acc = nn.Parameter(params["acc"])
@@ -75,7 +73,7 @@ class MotionParameters(nn.Module):
         """The spec's parameter dict; a scene without acceleration gets Q = 0 (a ≡ 0), not a parameter."""
         spec = self.spec
         ref = self.code[0]
-        acc = self.acc if spec.acceleration else ref.new_zeros(ACC_POLY_DEGREE + 1, spec.config.n_patterns, N_BASIS)
+        acc = self.acc if spec.acceleration else ref.new_zeros(ACC_POLY_DEGREE + 1, spec.n_patterns, N_BASIS)
         out = {"code": _layers(self.code), "mix": _layers(self.mix), "acc": acc}
         for name in ("time", "velocity_mlp", "adf"):
             value = getattr(self, name, None)
@@ -104,12 +102,11 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
     offset: the signed step training draws (±spec.carry_offset), 0 in evaluation; only
     "adf-step" reads it.
     adf: how scheme "integrate" evaluates the ADF's residual, `adf(params, x0, t_adf, z,
-    spec.config)` called before the integration and returning a function that gives (Δx, Δq,
+    spec)` called before the integration and returning a function that gives (Δx, Δq,
     Δs) after it; None: `inline_adf`. Training passes one whose backward overlaps the
     integration's (velogauss.train.loop).
     """
-    cfg = spec.config
-    z = physics_code(params, x0, cfg)
+    z = physics_code(params, x0, spec)
     if spec.scheme == "adf-step":
         x, q, s = _carried_state(params, spec, x0, q0, s0, z, t, carry_start(t, offset, spec.carry_until))
         return x, q, s, x
@@ -118,7 +115,7 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
     if spec.adf:
         t_adf = t if spec.adf_clamp_time is None else min(float(t), spec.adf_clamp_time)
         # Before the integration, so that an evaluation may place graph nodes on either side of it.
-        residual = (inline_adf if adf is None else adf)(params, x0, t_adf, z, cfg)
+        residual = (inline_adf if adf is None else adf)(params, x0, t_adf, z, spec)
     xs, qs, ss = _integrated_state(params, spec, x0, q0, s0, z, t)
     if not spec.adf:
         return xs, qs, ss, xs
@@ -131,9 +128,9 @@ def velocity_at(params: dict, spec: MotionSpec, x: torch.Tensor, t) -> torch.Ten
     """The Eulerian velocity v(x, t) (N, 3) at world points x (N, 3) (VG-FIELD, or the MLP's
     VG-VEL-MLP); zero without a velocity."""
     if spec.velocity == "affine":
-        return velocity_field(params, x, t, spec.config)
+        return velocity_field(params, x, t, spec)
     if spec.velocity == "mlp":
-        return mlp_velocity(params, x, t, spec.config)
+        return mlp_velocity(params, x, t, spec)
     return torch.zeros_like(x)
 
 
@@ -142,21 +139,20 @@ def particle_velocity(params: dict, spec: MotionSpec, x0: torch.Tensor, x: torch
     Φ(x) w(t, E(γ(x0))), the code frozen at the start as along a path (VG-VEL, VG-TRAJ).
     Without PDS the velocity MLP has no code: the Eulerian field at x. Zero without a velocity."""
     if spec.velocity == "affine":
-        cfg = spec.config
-        return velocity(x, coefficients(params, t, physics_code(params, x0, cfg), cfg))
+        return velocity(x, coefficients(params, t, physics_code(params, x0, spec), spec))
     return velocity_at(params, spec, x, t)
 
 
 def own_mixing(params: dict, spec: MotionSpec, x0: torch.Tensor) -> torch.Tensor:
     """The mixing weights m(E(γ(x0))) (N, K) of the particles at canonical x0 (N, 3) (VG-CODE,
     VG-COEF): what each Gaussian moves with."""
-    return mixing_weights(params, physics_code(params, x0, spec.config))
+    return mixing_weights(params, physics_code(params, x0, spec))
 
 
 def velocity_with_mixing(params: dict, spec: MotionSpec, x: torch.Tensor, t, m: torch.Tensor) -> torch.Tensor:
     """Φ(x) (m P(t)) (N, 3), masked as VG-COEF, at points x (N, 3) with mixing weights m (N, K):
     the velocity of VG-FIELD-GAUSS, whose m is interpolated from the Gaussians' own."""
-    return velocity(x, mixed_coefficients(params, t, m, spec.config))
+    return velocity(x, mixed_coefficients(params, t, m, spec))
 
 
 def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):
@@ -165,13 +161,12 @@ def motion_residuals(params: dict, spec: MotionSpec, x: torch.Tensor, t):
     VG-TRANSPORT (VG-TRANSPORT-MLP without PDS) and VG-DIV; the divergence is computed only
     when spec.divergence (the affine field shares one grad v between the two).
     """
-    cfg = spec.config
     if spec.velocity == "affine":
         if spec.divergence:
-            return physics_residuals(params, x, t, cfg)
-        return transport_residual(params, x, t, cfg), None
+            return physics_residuals(params, x, t, spec)
+        return transport_residual(params, x, t, spec), None
     if spec.velocity == "mlp":
-        return mlp_residuals(params, x, t, cfg, with_divergence=spec.divergence)
+        return mlp_residuals(params, x, t, spec, with_divergence=spec.divergence)
     raise ValueError("spec.velocity: a model without velocity has no physics residuals")
 
 
@@ -182,8 +177,8 @@ def carry_loss(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Tenso
     Needs spec.carry_loss (scheme "adf-step", affine velocity)."""
     if not spec.carry_loss:
         raise ValueError("spec.carry_loss: VG-LOSS-CARRY needs scheme \"adf-step\" and the affine velocity")
-    z = physics_code(params, x0, spec.config)
-    return carry.carry_loss(params, x0, q0, s0, z, t_a, t, spec.step, spec.integrator, spec.config)
+    z = physics_code(params, x0, spec)
+    return carry.carry_loss(params, x0, q0, s0, z, t_a, t, spec.step, spec.integrator, spec)
 
 
 def _carried_state(params, spec, x0, q0, s0, z, t, t_start):
@@ -191,10 +186,10 @@ def _carried_state(params, spec, x0, q0, s0, z, t, t_start):
     velocity (VG-CARRY). Without PDS the velocity MLP carries positions only (rotations and
     scales stay the ADF's at t_start), with the same stop-gradient on the start."""
     if spec.velocity == "affine":
-        return carry.carried_state(params, x0, q0, s0, z, t, t_start, spec.step, spec.integrator, spec.config)
-    xa, qa, sa = carry.adf_state(params, x0, q0, s0, z, t_start, spec.config)
+        return carry.carried_state(params, x0, q0, s0, z, t, t_start, spec.step, spec.integrator, spec)
+    xa, qa, sa = carry.adf_state(params, x0, q0, s0, z, t_start, spec)
     xs = xa.detach()
-    xv = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec.config), xs, t_start, t, spec.step,
+    xv = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec), xs, t_start, t, spec.step,
                    spec.integrator)
     return xa + (xv - xs), qa, sa
 
@@ -202,9 +197,9 @@ def _carried_state(params, spec, x0, q0, s0, z, t, t_start):
 def _integrated_state(params, spec, x0, q0, s0, z, t):
     """Scheme "integrate": (x*, q*, s*) by integration from t = 0 (VG-TRAJ)."""
     if spec.velocity == "affine":
-        return base_state(params, x0, q0, s0, z, t, spec.step, spec.integrator, spec.config)
+        return base_state(params, x0, q0, s0, z, t, spec.step, spec.integrator, spec)
     if spec.velocity == "mlp":
-        x = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec.config), x0, 0.0, t, spec.step,
+        x = integrate(lambda y, tau: mlp_velocity(params, y, tau, spec), x0, 0.0, t, spec.step,
                       spec.integrator)
         return x, q0, s0
     return x0, q0, s0

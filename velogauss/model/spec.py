@@ -1,9 +1,10 @@
-"""The resolved description of a model's motion: config + scene profile + ablation, once.
+"""The resolution of a model's motion: config + scene effects + ablation → `MotionSpec`, once.
 
-`resolve_motion_spec` turns the training config's model section, the scene's
-`MotionProfile` and the ablation (paper Table "ablation") into one frozen `MotionSpec`.
-The motion (`velogauss.model.motion.gaussians_at`), the model and the training loop read
-only this spec; no other layer re-derives which pieces run.
+`resolve_motion_spec` turns the training config's model section (what the user configures,
+`velogauss.config.ModelConfig`), the scene's declaration (scene.json) and the ablation (paper
+Table "ablation") into one frozen `velogauss_core.motion.MotionSpec`, the resolved plan. The
+motion (`velogauss.model.motion.gaussians_at`), the model and the training loop read only
+this spec; no other layer re-derives which pieces run.
 
 | ablation     | velocity        | ADF | physics losses (GPC) |
 |--------------|-----------------|-----|----------------------|
@@ -13,17 +14,44 @@ only this spec; no other layer re-derives which pieces run.
 | no-gpc       | affine (PDS)    | yes | no                   |
 | deform-only  | none            | yes | no  (DefGS-style)    |
 
+Which physics a scene calls for follows from its effects (a subset of
+`velogauss_core.motion.EFFECTS`: translation, rotation, gravity, stretch, shear, oscillation,
+static) and whether its motion is incompressible, declared in `scene.json` or by the config:
+
+- velocity basis columns (VG-BASIS groups): one group per motion effect, plus the
+  translation columns whenever anything moves: rotation, stretch and shear about a
+  centre c other than the origin carry the constant term −A c (and gravity needs them
+  anyway). Rigid scenes get 6 columns, affine ones up to 12.
+- acceleration (VG-ACC): off for uniform translation (Dv/Dt = 0: the transport residual
+  is then Newton's first law); on for gravity, oscillation and any rotation, stretch or shear,
+  whose material acceleration (centripetal, A² x) is non-zero even at constant
+  coefficients. Its columns follow spec/physics.md: translation columns when the velocity
+  is translation-only and the acceleration a polynomial, else all 12 (A² leaves the
+  velocity's span). Its time dependence: a polynomial in t (VG-ACC) by default, or a
+  rigid body's (VG-ACC-RIGID: constant spin, centre under a constant acceleration), as the
+  config's `model.acceleration` says ("auto": rigid when the scene's motion is rigid, i.e.
+  translation, rotation and gravity only).
+- motion patterns: a time network (VG-COEF), or for a scene whose motion is rigid, rigid
+  bodies under a constant acceleration (VG-COEF-RIGID), or for a scene that declares
+  oscillation, oscillators of learned frequency (VG-COEF-HARM), as the config's
+  `model.patterns` says ("auto": harmonic when the scene oscillates, else rigid when its
+  motion is rigid, else the time network). Rigid centres accelerate (3 knots) only when the
+  scene declares gravity; otherwise they drift uniformly (2 knots). Harmonic patterns bring
+  their own acceleration (VG-ACC-HARM, at their frequencies), whatever `model.acceleration` says.
+- divergence loss (VG-DIV): only for incompressible motion.
+- a scene with no motion effect (`static` alone) builds no velocity at all.
+
 Adding a training scheme: one more value of `Scheme` (velogauss_core.motion), resolved
 here, and one branch in `velogauss.model.motion.gaussians_at` (ARCHITECTURE.md).
 """
 
-import dataclasses
 from dataclasses import dataclass
 
-from velogauss.model.profile import MotionProfile
-# `Scheme` ("integrate" (a), "adf-step" (b)) is defined once in velogauss_core.motion, where
-# the config (which this package imports) can type its key.
-from velogauss_core.motion import Integrator, MotionConfig, MotionSizes, QueryCode, Scheme, VelocityKind
+from velogauss_core.motion import (COLUMN_GROUPS, EFFECTS, MOTION_EFFECTS, UNDECLARED_EFFECTS, MotionSpec,
+                                   NetworkSizes, VelocityKind)
+
+# The motion effects a rigid body's acceleration (VG-ACC-RIGID) can follow.
+RIGID_EFFECTS = frozenset({"translation", "rotation"})
 
 
 @dataclass(frozen=True)
@@ -43,101 +71,97 @@ ABLATION_SWITCHES: dict[str, _Switches] = {
 }
 
 
-@dataclass(frozen=True)
-class MotionSpec:
-    """What the motion of one model computes, resolved once (see the module docstring).
-
-    scheme: how positions come from the velocity (`Scheme`); "adf-step" only where there is
-      a velocity and an ADF (it carries the ADF's state), else resolved to "integrate";
-    moving: the scene moves at all (False: a static scene, no motion parameters, every
-      other field is then off);
-    velocity: "affine" (PDS: Phi(x) w(t, z) over config.mask, VG-VEL), "mlp" (no-pds) or None
-      (deform-only: x* = x0);
-    config: network sizes, the basis masks (velocity mask, acceleration mask) and the
-      acceleration's form;
-    acceleration: the acceleration (VG-ACC or VG-ACC-RIGID, config.acc_form) is a parameter
-      (else Q = 0);
-    integrator, step: VG-INTEG's method and largest step in normalised time;
-    adf: the ADF residual is built and applied (VG-ADF);
-    adf_clamp_time: the ADF's input time is min(t, this), or None (evaluated at every t);
-    adf_loss: the L2 penalty on the ADF's displacement |x - x*|^2 is on (ADF on top of a
-      velocity, scheme "integrate"; under "adf-step" x = x*, the penalty would be 0);
-    physics_loss: the VG-LOSS-PHYS transport residual on collocation points is on (GPC);
-    divergence: the VG-DIV term of the physics loss is on (incompressible motion);
-    carry_until: scheme "adf-step": the end of the ADF's window (max_time), where beyond it
-      the velocity alone carries the ADF's state (VG-CARRY); None for "integrate";
-    carry_offset: scheme "adf-step": |t - t_start| of VG-CARRY in training (0 otherwise);
-    carry_loss: VG-LOSS-CARRY (the affine velocity fitted to the ADF's paths) can be on:
-      scheme "adf-step" with the affine velocity; its weight is train.lambda_carry;
-    query_code: where a material point that is not a Gaussian takes its mixing weights:
-      "gaussians" from its nearest Gaussians' (VG-FIELD-GAUSS) under the affine velocity,
-      "network" elsewhere (the velocity MLP of no-pds reads the point itself; no mixing weights).
-    """
-
-    scheme: Scheme
-    moving: bool
-    velocity: VelocityKind | None
-    config: MotionConfig
-    acceleration: bool
-    integrator: Integrator
-    step: float
-    adf: bool
-    adf_clamp_time: float | None
-    adf_loss: bool
-    physics_loss: bool
-    divergence: bool
-    carry_until: float | None
-    carry_offset: float
-    carry_loss: bool
-    query_code: QueryCode
-
-    @property
-    def rigid_patterns(self) -> bool:
-        """The affine velocity's motion patterns are VG-COEF-RIGID's rigid bodies (`params["time"]`
-        is their B, a (K, 3 + 3 n) tensor)."""
-        return self.velocity == "affine" and self.config.pattern_form == "rigid"
-
-    def without_adf(self) -> "MotionSpec":
-        """This spec with the ADF skipped: what training runs before the ADF starts learning
-        (its last layer is still zero then, so skipping it is exactly the identity). Scheme
-        "adf-step" carries the ADF's state, so without the ADF it is "integrate"."""
-        return dataclasses.replace(self, adf=False, scheme="integrate", carry_until=None, carry_offset=0.0,
-                                   carry_loss=False)
-
-
-def resolve_motion_spec(model_cfg, profile: MotionProfile, max_time: float) -> MotionSpec:
+def resolve_motion_spec(model_cfg, metadata: dict | None, max_time: float) -> MotionSpec:
     """The `MotionSpec` of a training config's model section (`velogauss.config.ModelConfig`),
-    a scene's `profile` and the end of the observed window `max_time`.
+    a scene's `metadata` (a parsed scene.json, or None) and the end of the observed window
+    `max_time`.
 
+    `model.effects` / `model.incompressible` "auto" take the scene's declaration from
+    `metadata`, else every effect but oscillation (UNDECLARED_EFFECTS) and incompressible
+    motion (what NVFi-style methods assume for real scenes). ValueError when
+    `model.acceleration` or `model.patterns` asks "rigid" of a scene that stretches or shears.
     deform-only evaluates its ADF at every t (a DefGS-style model, as DefGS does); the
     others hold it at max_time beyond the window when `model_cfg.adf_clamp_time`.
     """
+    scene = _scene_motion(model_cfg, metadata)
     switches = ABLATION_SWITCHES[model_cfg.ablation]
-    moving = bool(profile.moving)
+    moving = scene["moving"]
     velocity = switches.velocity if moving else None
     adf = moving and switches.adf
     clamp = model_cfg.adf_clamp_time and model_cfg.ablation != "deform-only"
-    # The sizes are MotionSizes's fields, which ModelConfig inherits (no list of names here).
-    sizes = {f.name: getattr(model_cfg, f.name) for f in dataclasses.fields(MotionSizes)}
+    # The sizes are NetworkSizes's fields, which ModelConfig inherits (no list of names here).
+    sizes = {name: getattr(model_cfg, name) for name in NetworkSizes.__dataclass_fields__}
     carry = model_cfg.scheme == "adf-step" and adf and velocity is not None
     return MotionSpec(
-        scheme="adf-step" if carry else "integrate",
+        **sizes,
+        mask=scene["mask"],
+        acc_mask=scene["acc_mask"],
+        acc_form=scene["acc_form"],
+        pattern_form=scene["pattern_form"],
+        max_time=float(max_time),
+        rigid_knots=scene["rigid_knots"],
+        effects=scene["effects"],
         moving=moving,
+        scheme="adf-step" if carry else "integrate",
         velocity=velocity,
-        config=MotionConfig(**sizes, mask=profile.mask, acc_mask=profile.acc_mask, acc_form=profile.acc_form,
-                            pattern_form=profile.pattern_form, max_time=float(max_time),
-                            rigid_knots=profile.rigid_knots),
-        acceleration=moving and bool(profile.acceleration),
+        acceleration=scene["acceleration"],
         integrator=model_cfg.integrator,
         step=float(model_cfg.step),
         adf=adf,
         adf_clamp_time=float(max_time) if clamp else None,
         adf_loss=adf and velocity is not None and not carry,  # scheme (b) renders the ADF's state: x = x*
         physics_loss=switches.gpc and velocity is not None,
-        divergence=switches.gpc and velocity is not None and bool(profile.divergence),
+        divergence=switches.gpc and velocity is not None and scene["incompressible"],
         carry_until=float(max_time) if carry else None,
         carry_offset=float(model_cfg.carry_offset) if carry else 0.0,
         carry_loss=carry and velocity == "affine",
         query_code="gaussians" if velocity == "affine" else "network",
     )
 
+
+def _scene_motion(model_cfg, metadata):
+    """What the scene's effects call for (the module docstring's list), before the ablation:
+    effects, moving, mask, acceleration, acc_mask, acc_form, pattern_form, rigid_knots and
+    incompressible, by name."""
+    effects, incompressible = model_cfg.effects, model_cfg.incompressible
+    acceleration, patterns = model_cfg.acceleration, model_cfg.patterns
+    if effects == "auto":
+        effects = tuple((metadata or {}).get("effects", UNDECLARED_EFFECTS))
+    if incompressible == "auto":
+        incompressible = bool((metadata or {}).get("incompressible", True))
+    effects = tuple(e for e in EFFECTS if e in effects)
+    groups = {e for e in effects if e in MOTION_EFFECTS}
+    if groups or "gravity" in effects:
+        groups.add("translation")
+    moving = bool(groups)
+    oscillates = "oscillation" in effects
+    has_acceleration = moving and ("gravity" in effects or oscillates or bool(groups - {"translation"}))
+    rigid = groups <= RIGID_EFFECTS
+    for key, value, other in (("acceleration", acceleration, "poly"), ("patterns", patterns, "mlp")):
+        if value == "rigid" and not rigid:
+            raise ValueError(f"model.{key}: 'rigid' cannot follow the effects {sorted(groups - RIGID_EFFECTS)} "
+                             f"(a rigid body neither stretches nor shears); use '{other}' or 'auto'")
+    if patterns == "auto":
+        patterns = "harmonic" if oscillates and moving else "rigid" if rigid and moving else "mlp"
+    form = ("rigid" if rigid else "poly") if acceleration == "auto" else acceleration
+    # A moving harmonic pattern always has an acceleration (its reversal).
+    form = "harmonic" if patterns == "harmonic" else form if has_acceleration else "poly"
+    has_acceleration = has_acceleration or (moving and patterns == "harmonic")
+    if not has_acceleration:
+        acc_mask = (False,) * 12
+    elif groups == {"translation"} and form == "poly":
+        acc_mask = _columns({"translation"})
+    else:
+        # The rigid form's Omega^2 lies on the stretch and shear columns: masking them while
+        # keeping its -Omega^2 c(t) translation term would not be a rigid body's acceleration.
+        acc_mask = (True,) * 12
+    return {"effects": effects, "moving": moving, "mask": _columns(groups), "acceleration": has_acceleration,
+            "acc_mask": acc_mask, "acc_form": form, "pattern_form": patterns,
+            # Without gravity nothing accelerates a body's centre: it drifts uniformly, and a
+            # third knot would only let noise bend its path.
+            "rigid_knots": 3 if "gravity" in effects else 2, "incompressible": moving and bool(incompressible)}
+
+
+def _columns(groups):
+    selected = {c for g in groups for c in COLUMN_GROUPS[g]}
+    return tuple(c in selected for c in range(12))

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from velogauss.model import motion as motion_fns
-from velogauss.model.spec import MotionSpec
+from velogauss_core.motion import MotionSpec
 from velogauss_fast.checks import check_array, check_finite
 from velogauss_fast.motion.between import mixing_between
 from velogauss_fast.motion.scalars import check_time

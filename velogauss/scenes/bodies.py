@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from velogauss.scenes.motions import Motion, motion_from_dict
+from velogauss.scenes.trajectories import Motion, motion_from_dict
 from velogauss_core.checks import check_array
 from velogauss_core.constants import POSE_ORTHONORMAL_TOL
 

@@ -39,7 +39,7 @@ from scipy.spatial.transform import Rotation
 
 from velogauss.data.errors import DataError
 from velogauss.scenes.bodies import Body, Texture
-from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
+from velogauss.scenes.trajectories import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
 from velogauss.scenes.scene import AnalyticScene
 
 _ORANGE, _BLUE = (0.95, 0.55, 0.15), (0.15, 0.35, 0.85)

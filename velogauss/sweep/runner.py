@@ -74,6 +74,9 @@ def plan_point(point, config_path, out_dir):
     except ValueError as err:
         previous = err
     # A run folder records the numbers its "auto" keys resolved to, and a resumed run uses them.
+    if not isinstance(previous, ValueError) and cfg.data.split != "time" and previous.data.split == cfg.data.split:
+        # A future split's window end is derived from the data (spec/data.md), so the run's value stands.
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, max_time=previous.data.max_time))
     if isinstance(previous, ValueError) or resolve_from_run(previous, previous) != resolve_from_run(cfg, previous):
         return Plan(point, run_dir, data_dir, "fail",
                     f"{saved}: the run folder holds a different config; move it away or change `out` "

@@ -152,7 +152,7 @@ def loss_and_gradients(canon, leaves, cfg, params, spec, draws):
         loss = loss + cfg.train.lambda_carry * carry_loss(params, spec, x0, q0, s0, d.t_a, d.t)
     if draws.mixing is not None:
         # Detached means: the entropy shapes the code and mixing networks, it does not move the Gaussians.
-        z = physics_code(params, canon.means.index_select(0, draws.mixing), spec.config)
+        z = physics_code(params, canon.means.index_select(0, draws.mixing), spec)
         loss = loss + mixing_entropy_loss(mixing_logits(params, z), cfg.train.lambda_mix)
     return loss.detach(), list(zip(leaves, torch.autograd.grad(loss, leaves, allow_unused=True)))
 

@@ -30,20 +30,20 @@ from velogauss.train.mixing import resolve_mixing_init
 from velogauss_core.constants import RIGID_HULL_OPACITY
 
 
-def resolve_rigid_centre(choice, profile, mixing_init):
+def resolve_rigid_centre(choice, spec, mixing_init):
     """"hull" (anchored) or "learned" (trained from the images alone) for the config's
-    `model.rigid_centre` ("auto" or "hull"), a `MotionProfile` and the config's
+    `model.rigid_centre` ("auto" or "hull"), a `MotionSpec` and the config's
     `model.mixing_init`: "auto" is "hull" for rigid patterns whose centres move on a parabola
     (3 knots: the scene declares gravity) and whose mixing starts uniform (one body), else
     "learned". "hull" without rigid patterns raises ValueError."""
-    rigid = profile.pattern_form == "rigid"
+    rigid = spec.pattern_form == "rigid"
     if choice == "hull" and not rigid:
         raise ValueError(f"model.rigid_centre: 'hull' anchors rigid motion patterns, and this scene's patterns "
-                         f"are {profile.pattern_form!r}; use 'auto'")
+                         f"are {spec.pattern_form!r}; use 'auto'")
     if choice == "hull":
         return choice
-    one_body = resolve_mixing_init(mixing_init, profile) == "uniform"
-    return "hull" if rigid and profile.rigid_knots == 3 and one_body else "learned"
+    one_body = resolve_mixing_init(mixing_init, spec) == "uniform"
+    return "hull" if rigid and spec.rigid_knots == 3 and one_body else "learned"
 
 
 def hull_centroid(points):
@@ -64,7 +64,7 @@ def hull_centroid(points):
 @torch.no_grad()
 def anchor_centres(model):
     """Set every knot of each rigid pattern of `model` (a `VeloGaussModel` whose
-    spec.config.pattern_form is "rigid") to the hull centroid of its moving Gaussians at
+    spec.pattern_form is "rigid") to the hull centroid of its moving Gaussians at
     least RIGID_HULL_OPACITY times as opaque as the most opaque. Returns that centre (3,) NumPy.
 
     Raises ValueError unless the patterns are still (ω = 0, each pattern's knots equal):

@@ -2,7 +2,7 @@
 
 `RUN_DIR/checkpoints/latest.pt` is written atomically (velogauss.io_utils.atomic_path):
 a crash or Ctrl-C during the write leaves the previous checkpoint intact. It holds the
-config, the resolved effect profile, the model's state (its shapes follow from it), the
+config, the model's resolved `MotionSpec`, its state (its shapes follow from both), the
 optimiser, the density statistics, the NumPy and torch RNG states, the iteration count
 and, under the key "extra", the trainer's run state (`velogauss.train.loop.RunState` as a
 dict: training time so far, whether an opacity reset has happened, the PSNR moving average).
@@ -23,26 +23,27 @@ import torch
 
 from velogauss.config import config_from_dict, config_to_dict
 from velogauss.io_utils import write_bytes
-from velogauss.model.build import model_from_state, profile_from_dict
+from velogauss.model.build import model_from_state
+from velogauss_core.motion import spec_from_dict
 
 MAGIC = "velogauss-checkpoint"  # the first word of every checkpoint
-# The layout of the payload, its config and profile; raise it with any change that an older
+# The layout of the payload, its config and spec; raise it with any change that an older
 # checkpoint would load wrongly under.
-CHECKPOINT_FORMAT = 2
-_KEYS = ("iteration", "config", "profile", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
+CHECKPOINT_FORMAT = 3
+_KEYS = ("iteration", "config", "spec", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
 
 
 def checkpoint_path(run_dir):
     return Path(run_dir) / "checkpoints" / "latest.pt"
 
 
-def save_checkpoint(run_dir, cfg, profile, model, optimizer, stats, rng, iteration, run_state):
+def save_checkpoint(run_dir, cfg, model, optimizer, stats, rng, iteration, run_state):
     """Write `latest.pt` atomically. run_state: the trainer's `RunState` as a dict
     (dataclasses.asdict), plain numbers and flags."""
     payload = {
         "iteration": int(iteration),
         "config": config_to_dict(cfg),
-        "profile": dataclasses.asdict(profile),
+        "spec": dataclasses.asdict(model.spec),
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
         "density": stats.state_dict(),
@@ -104,7 +105,7 @@ def load_model(run_dir, device="cpu"):
     `RUN_DIR/checkpoints/latest.pt`: every caller (eval, render, export, view) is inference."""
     payload = load_checkpoint(run_dir, device)
     cfg = config_from_dict(payload["config"], source=str(checkpoint_path(run_dir)))
-    model = model_from_state(cfg, profile_from_dict(payload["profile"]), payload["model"])
+    model = model_from_state(cfg, spec_from_dict(payload["spec"]), payload["model"])
     model.load_state_dict(payload["model"])
     return model.to(device).eval().requires_grad_(False), cfg
 

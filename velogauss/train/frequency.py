@@ -71,7 +71,7 @@ def start_frequency(model, frames, max_time):
     (the frequency then stays at HARMONIC_CYCLES_INIT cycles), is left as it is. Returns the
     frequency set, or None."""
     spec = model.spec
-    if not (spec.moving and spec.velocity == "affine" and spec.config.pattern_form == "harmonic"):
+    if not (spec.moving and spec.velocity == "affine" and spec.pattern_form == "harmonic"):
         return None
     omega = video_frequency(frames, max_time)
     if omega is not None:

@@ -37,8 +37,7 @@ from velogauss.config import (check_resume_config, config_from_dict, resolve_fro
                               resolve_transport, to_toml)
 from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
-from velogauss.model import build_model, model_from_state, scene_profile
-from velogauss.model.build import profile_from_dict
+from velogauss.model import build_model, model_from_state, scene_spec
 from velogauss.model.velogauss_model import moving_state_at, render_gaussians
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
@@ -55,6 +54,7 @@ from velogauss_fast.backends import numba_backend
 from velogauss_fast.losses import photometric_loss
 from velogauss_fast.metrics import psnr, ssim_target
 from velogauss_core.constants import STATIC_MOTION_PX
+from velogauss_core.motion import spec_from_dict
 
 # Frames of the interpolation split scored at each evaluation (evenly spread): enough for
 # a stable mean, few enough that an evaluation costs a fraction of a second.
@@ -101,11 +101,14 @@ def prepare(cfg, data, run_dir, resume=False):
     times them).
     The schedule's "auto" keys and the transport weight's are resolved here
     (`resolve_schedule`, `resolve_transport`): for a new run from `train.iterations` and the
-    scene profile's patterns, on resume to the run's own values; `trainer.cfg` and config.toml
-    hold the numbers used.
+    motion patterns of the scene's spec, on resume to the run's own values; `trainer.cfg` and config.toml
+    hold the numbers used. Under a "future:F" `cfg.data.split`, `cfg.data.max_time` becomes the
+    scene's `max_time`, the window's end that split derived (spec/data.md, "Splits").
     """
     _, parallel = apply_threads(cfg.train.threads)
     check_trainable_size(data)
+    if cfg.data.split != "time":  # the window's end comes from the data, and config.toml records it
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, max_time=data.max_time))
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
     extent = camera_extent([f.camera for f in data.train])
@@ -115,8 +118,7 @@ def prepare(cfg, data, run_dir, resume=False):
         saved = config_from_dict(payload["config"], str(checkpoint_path(run_dir)))
         cfg = resolve_from_run(cfg, saved)
         check_resume_config(saved, cfg)
-        profile = profile_from_dict(payload["profile"])
-        model = model_from_state(cfg, profile, payload["model"])
+        model = model_from_state(cfg, spec_from_dict(payload["spec"]), payload["model"])
         model.load_state_dict(payload["model"])
         model.to(device)
         rng = np.random.default_rng()
@@ -131,11 +133,11 @@ def prepare(cfg, data, run_dir, resume=False):
         warn_short_schedule(cfg.train)
         rng = np.random.default_rng(cfg.train.seed)
         torch.manual_seed(cfg.train.seed)
-        profile = scene_profile(cfg, data.metadata)
-        cfg = resolve_transport(cfg, profile.pattern_form)
+        spec = scene_spec(cfg, data.metadata)
+        cfg = resolve_transport(cfg, spec.pattern_form)
         points, colors = _initial_points(data, cfg.model.init_points, rng)
-        model = build_model(cfg, profile, points, colors, rng).to(device)
-        if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, profile) == "clusters":
+        model = build_model(cfg, spec, points, colors, rng).to(device)
+        if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, spec) == "clusters":
             separate_patterns(model.motion, model.gaussians.means, rng)
         start_frequency(model, data.train, data.max_time)
         start, state = 0, RunState()
@@ -152,7 +154,7 @@ def prepare(cfg, data, run_dir, resume=False):
     # run inline. Started now (once per process), so that it has imported torch by the end of
     # the warm-up, which has no auxiliary losses.
     worker = aux_worker.process() if parallel >= 2 and device.type == "cpu" else None
-    return Trainer(cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, state, device, worker), start
+    return Trainer(cfg, data, run_dir, model, optimizer, stats, rng, extent, state, device, worker), start
 
 
 @dataclasses.dataclass
@@ -170,12 +172,11 @@ class Trainer:
     """The state of one training run between iterations: `step` runs one, `adapt_gaussians`
     then adapts the set of Gaussians, `run` loops both with logging and checkpoints."""
 
-    def __init__(self, cfg, data, run_dir, model, optimizer, stats, profile, rng, extent, state, device,
-                 aux_worker):
+    def __init__(self, cfg, data, run_dir, model, optimizer, stats, rng, extent, state, device, aux_worker):
         self.cfg, self.data, self.run_dir = cfg, data, run_dir
         # velogauss.train.aux_worker.AuxWorker: the auxiliary losses beside the renders, or None (inline).
         self.aux_worker = aux_worker
-        self.model, self.optimizer, self.stats, self.profile = model, optimizer, stats, profile
+        self.model, self.optimizer, self.stats = model, optimizer, stats
         self.rng, self.extent, self.state, self.device = rng, extent, state, device
         # What the motion computes and which losses are on, resolved once when the model was built.
         self.spec = model.spec
@@ -192,7 +193,7 @@ class Trainer:
         # Rigid patterns anchored on the body's centre (velogauss.train.centres): the mask that
         # holds their first knot from the warm-up's end, None when the centres are learned.
         anchored = (self.spec.velocity == "affine" and
-                    resolve_rigid_centre(cfg.model.rigid_centre, profile, cfg.model.mixing_init) == "hull")
+                    resolve_rigid_centre(cfg.model.rigid_centre, self.spec, cfg.model.mixing_init) == "hull")
         self.knot_mask = first_knot_mask(model.motion.time.detach()) if anchored else None
 
     def auto_adf_start(self):
@@ -203,7 +204,7 @@ class Trainer:
         (benchmarks/FIDELITY.md, section 0f)."""
         spec, t = self.spec, self.cfg.train
         adf_first = (spec.velocity is None or spec.scheme == "adf-step"
-                     or (spec.velocity == "affine" and spec.config.pattern_form == "mlp"))
+                     or (spec.velocity == "affine" and spec.pattern_form == "mlp"))
         return t.warmup if adf_first else t.warmup + t.curriculum
 
     def run(self, start, progress):
@@ -373,7 +374,7 @@ class Trainer:
     def checkpoint(self, done, elapsed):
         """Write the run's checkpoint after `done` iterations and `elapsed` seconds of training."""
         self.state.elapsed_s = elapsed
-        save_checkpoint(self.run_dir, self.cfg, self.profile, self.model, self.optimizer, self.stats, self.rng, done,
+        save_checkpoint(self.run_dir, self.cfg, self.model, self.optimizer, self.stats, self.rng, done,
                         dataclasses.asdict(self.state))
 
 

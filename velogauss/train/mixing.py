@@ -30,13 +30,13 @@ from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_weights
 
 
-def resolve_mixing_init(choice, profile):
-    """"clusters" or "uniform" for the config's `model.mixing_init` and a `MotionProfile`:
-    "auto" is "clusters" when the profile's effects hold `static` (a still body beside moving
+def resolve_mixing_init(choice, spec):
+    """"clusters" or "uniform" for the config's `model.mixing_init` and a `MotionSpec`:
+    "auto" is "clusters" when the spec's effects hold `static` (a still body beside moving
     ones: more than one motion to tell apart) and something moves, else "uniform"."""
     if choice != "auto":
         return choice
-    return "clusters" if profile.moving and "static" in profile.effects else "uniform"
+    return "clusters" if spec.moving and "static" in spec.effects else "uniform"
 
 
 def cluster_targets(points, k, rng):
@@ -55,8 +55,8 @@ def separate_patterns(motion, points, rng, steps=MIXING_INIT_STEPS, weight=MIXIN
 
     Cross-entropy against the smoothed one-hot targets, full batch, `steps` Adam steps at
     MIXING_INIT_LR. Returns the mean weight on the own cluster's pattern after the fit."""
-    cfg = motion.spec.config
-    k = cfg.n_patterns
+    spec = motion.spec
+    k = spec.n_patterns
     x = points.detach().to(motion.code[0].dtype)
     labels, _ = cluster_targets(x.cpu().numpy(), k, rng)
     labels = torch.as_tensor(labels, dtype=torch.long, device=x.device)
@@ -67,12 +67,12 @@ def separate_patterns(motion, points, rng, steps=MIXING_INIT_STEPS, weight=MIXIN
     optimizer = torch.optim.Adam(trained, lr=MIXING_INIT_LR)
     for _ in range(steps):
         params = motion.params()
-        log_m = torch.log(mixing_weights(params, physics_code(params, x, cfg)))
+        log_m = torch.log(mixing_weights(params, physics_code(params, x, spec)))
         loss = -(targets * log_m).sum(1).mean()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
     with torch.no_grad():
         params = motion.params()
-        m = mixing_weights(params, physics_code(params, x, cfg))
+        m = mixing_weights(params, physics_code(params, x, spec))
         return float(m[torch.arange(len(x), device=x.device), labels].mean())

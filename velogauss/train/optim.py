@@ -36,7 +36,7 @@ def make_optimizer(model, train_cfg, extent):
         acc = [model.motion.acc] if model.spec.acceleration else []
         if model.spec.rigid_patterns:
             acc.append(model.motion.time)
-        if model.spec.velocity == "affine" and model.spec.config.pattern_form == "harmonic":
+        if model.spec.velocity == "affine" and model.spec.pattern_form == "harmonic":
             # C, not the frequency (VG-COEF-HARM): Adam moves a parameter by about its rate
             # per step whatever its gradient, and the shared frequency, started where the
             # video oscillates, is barely determined while the curriculum's window is shorter

@@ -4,13 +4,13 @@ motion parameters whose fields are known in closed form. Everything comes from f
 
 import numpy as np
 
-from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, init_motion_params, mlp_layers, MotionConfig, network_shapes
+from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, init_motion_params, mlp_layers, MotionSpec, network_shapes
 
 # Far smaller networks than training's defaults (spec/motion.md: L = 16, K = 32, hidden 64,
 # depth 3), so that every example, and the per-point autograd residuals in particular, runs
 # in a fraction of a second; every branch of the model still runs (gamma of x with two
 # frequencies, the code, the K-pattern mixing, the ADF's time encoding).
-CFG = MotionConfig(n_freqs_x=2, n_freqs_t=0, n_freqs_adf_x=2, n_freqs_adf_t=1, code_dim=4, n_patterns=4,
+CFG = MotionSpec(n_freqs_x=2, n_freqs_t=0, n_freqs_adf_x=2, n_freqs_adf_t=1, code_dim=4, n_patterns=4,
                    hidden=16, depth=2)
 
 

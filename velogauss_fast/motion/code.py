@@ -11,7 +11,7 @@ def physics_code(params, x0, cfg):
     """z = E(gamma(x0)): the material code of each particle (VG-CODE).
 
     params: motion parameter dict (uses params["code"]); x0: (N, 3) canonical positions;
-    cfg: MotionConfig (gamma with cfg.n_freqs_x frequencies) -> z: (N, cfg.code_dim).
+    cfg: MotionSpec (gamma with cfg.n_freqs_x frequencies) -> z: (N, cfg.code_dim).
     """
     check_array("x0", x0, (None, 3))
     return mlp(params["code"], positional_encoding(x0, cfg.n_freqs_x))

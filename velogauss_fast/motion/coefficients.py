@@ -20,7 +20,7 @@ def coefficients(params, t, z, cfg):
     """w = m(z) P(t), masked by cfg.mask (VG-COEF).
 
     params: motion parameter dict (uses "mix" and "time"); t: scalar time (number or 0-d
-    tensor, any real value); z: (N, L) physics codes; cfg: MotionConfig -> w: (N, 12).
+    tensor, any real value); z: (N, L) physics codes; cfg: MotionSpec -> w: (N, 12).
     m(z) = softmax(z A + c) (N, K); P(t) = mlp(time, gamma(t)) reshaped (K, 12), evaluated once
     (the rigid bodies of VG-COEF-RIGID when cfg.pattern_form is "rigid", the oscillators of
     VG-COEF-HARM when "harmonic").

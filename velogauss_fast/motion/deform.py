@@ -16,7 +16,7 @@ def adf_residual(params, x0, t, z, cfg):
     """(dx, dq, ds) = F_MLP(gamma(x0), gamma(t), z): the correction to the base state (VG-ADF).
 
     params: motion parameter dict (uses params["adf"], 10 outputs); x0: (N, 3) canonical
-    means; t: scalar time; z: (N, L) codes; cfg: MotionConfig (cfg.n_freqs_adf_x,
+    means; t: scalar time; z: (N, L) codes; cfg: MotionSpec (cfg.n_freqs_adf_x,
     cfg.n_freqs_adf_t) -> dx (N, 3), dq (N, 4) = (1, 0, 0, 0) + o[3:7], ds (N, 3) (log scale).
     """
     check_array("x0", x0, (None, 3))

@@ -21,7 +21,7 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg, t0=0.0):
     params: motion parameter dict; x0: (N, 3) canonical means; q0: (N, 4) quaternions (any
     norm); s0: (N, 3) positive scales; z: (N, L) frozen physics codes; t: scalar target time
     (any real value; negative integrates backward); h > 0: maximum step; method: "euler" |
-    "rk2" | "rk4"; cfg: MotionConfig -> x_t (N, 3), q_t (N, 4) unit, s_t (N, 3).
+    "rk2" | "rk4"; cfg: MotionSpec -> x_t (N, 3), q_t (N, 4) unit, s_t (N, 3).
     Only what cfg.mask moves is integrated (`velogauss_fast.motion.rates`): without a
     rotation column q_t is q0 normalised, without a stretch or shear column s_t is s0 itself
     (both exactly what integrating their zero rates gives), and R(q0) is built once when log s

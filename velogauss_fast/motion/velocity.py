@@ -31,7 +31,7 @@ def velocity(x, w):
 def velocity_field(params, x, t, cfg):
     """v(x, t) = Phi(x) w(t, E(gamma(x))): the code is taken at the query point (VG-FIELD).
 
-    params: motion parameter dict; x: (N, 3) query points; t: scalar time; cfg: MotionConfig
+    params: motion parameter dict; x: (N, 3) query points; t: scalar time; cfg: MotionSpec
     -> v: (N, 3). This is the field the physics residuals constrain.
     """
     check_array("x", x, (None, 3))
@@ -43,7 +43,7 @@ def mlp_velocity(params, x, t, cfg):
     """v(x, t) = MLP_v([gamma(x), t]): the unconstrained velocity of the "no-pds" ablation (VG-VEL-MLP).
 
     params: dict with "velocity_mlp" (layers 3 (1 + 2 cfg.n_freqs_x) + 1 -> hidden^depth -> 3);
-    x: (N, 3) points; t: scalar time (number or 0-d tensor); cfg: MotionConfig -> v: (N, 3).
+    x: (N, 3) points; t: scalar time (number or 0-d tensor); cfg: MotionSpec -> v: (N, 3).
     No code, no basis: it moves positions only (the paper's replacement of the PDS).
     """
     check_array("x", x, (None, 3))

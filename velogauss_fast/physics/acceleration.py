@@ -19,7 +19,7 @@ def acceleration_field(params, x, t, cfg):
     params: motion parameter dict (uses "code", "mix" and "acc": Q (ACC_POLY_DEGREE + 1, K, 12)
     when cfg.acc_form is "poly", R (K, 12) when "rigid", Q (2 ACC_HARMONICS + 1, K, 12) and the
     patterns' frequency, "time"[0][1], when "harmonic"); x: (N, 3) points; t: scalar time;
-    cfg: MotionConfig -> a: (N, 3), world units per unit time squared. All-zero Q (scenes
+    cfg: MotionSpec -> a: (N, 3), world units per unit time squared. All-zero Q (scenes
     without acceleration) gives a = 0.
     The acceleration's own mask cfg.acc_mask, not the velocity's cfg.mask, applies: the
     material derivative of a masked velocity field can need columns the velocity lacks.

@@ -37,7 +37,7 @@ def transport_residual(params, x, t, cfg):
     """r = dv/dt + (grad v) v - a at collocation points (VG-TRANSPORT; paper eq. 7).
 
     params: motion parameter dict; x: (N, 3) collocation points; t: scalar time (number or
-    0-d tensor); cfg: MotionConfig -> r: (N, 3). grad v includes the dependence of the code
+    0-d tensor); cfg: MotionSpec -> r: (N, 3). grad v includes the dependence of the code
     on x.
     """
     check_array("x", x, (None, 3))
@@ -48,7 +48,7 @@ def transport_residual(params, x, t, cfg):
 def divergence(params, x, t, cfg):
     """div v = trace(grad v) at collocation points (VG-DIV; paper eq. 8).
 
-    params: motion parameter dict; x: (N, 3); t: scalar time; cfg: MotionConfig -> (N,).
+    params: motion parameter dict; x: (N, 3); t: scalar time; cfg: MotionSpec -> (N,).
     Equals w7 + w8 + w9 where the coefficients do not vary with x.
     """
     check_array("x", x, (None, 3))
@@ -110,7 +110,7 @@ def mlp_residuals(params, x, t, cfg, with_divergence=False):
     The velocity is VG-VEL-MLP's, v = MLP_v([gamma(x), t]), at each collocation point.
 
     params: dict with "velocity_mlp", "code", "mix" and "acc"; x: (N, 3); t: scalar time;
-    cfg: MotionConfig; with_divergence: also return div v (VG-DIV), else None. The MLP acts on
+    cfg: MotionSpec; with_divergence: also return div v (VG-DIV), else None. The MLP acts on
     each point alone, so one batched JVP gives every point's directional derivative at once:
     along t for dv/dt, along v for (grad v) v, along each axis for the divergence.
     """

@@ -11,7 +11,7 @@ def physics_code(params, x0, cfg):
     """z = E(gamma(x0)): the material code a particle carries for all time (VG-CODE).
 
     params: motion parameter dict (uses params["code"], the MLP E); x0: (N, 3) canonical
-    positions; cfg: MotionConfig (gamma with cfg.n_freqs_x frequencies) -> z: (N, cfg.code_dim).
+    positions; cfg: MotionSpec (gamma with cfg.n_freqs_x frequencies) -> z: (N, cfg.code_dim).
     Non-finite or wrongly shaped x0 raises ValueError.
     """
     check_array("x0", x0, (None, 3))

@@ -17,7 +17,7 @@ def coefficients(params, t, z, cfg):
     """w = m(z) P(t), with the columns outside cfg.mask set to zero (VG-COEF).
 
     params: motion parameter dict (uses "mix" and "time"); t: scalar time, any real value;
-    z: (N, L) physics codes; cfg: MotionConfig -> w: (N, 12).
+    z: (N, L) physics codes; cfg: MotionSpec -> w: (N, 12).
     The time network runs once for this t; particles differ only through m(z), so every
     row of w is a convex combination of the K patterns (before masking).
     A non-finite or non-scalar t, or a z that is non-finite or not L wide (the rows of

@@ -21,7 +21,7 @@ def base_state(params, x0, q0, s0, z, t, h, method, cfg, t0=0.0):
     params: motion parameter dict; x0: (N, 3) canonical means; q0: (N, 4) quaternions, any
     norm; s0: (N, 3) positive scales; z: (N, L) physics codes, frozen along each path;
     t: scalar target time, any real value (t < 0 integrates backward); h > 0: largest step;
-    method: "euler" | "rk2" | "rk4" (VG-INTEG); cfg: MotionConfig ->
+    method: "euler" | "rk2" | "rk4" (VG-INTEG); cfg: MotionSpec ->
     x_t (N, 3), q_t (N, 4) unit, s_t (N, 3) positive.
     The rates are x_dot = Phi(x) w and (q_dot, d log s/dt) = rotscale_rates(q, w), with
     w = coefficients(params, tau, z, cfg). t = 0 returns the canonical state (q0

@@ -27,7 +27,7 @@ def velocity_field(params, x, t, cfg):
     """v(x, t) = Phi(x) w(t, E(gamma(x))), the code taken at the query point (VG-FIELD).
 
     params: motion parameter dict; x: (N, 3) query points; t: scalar time, any real value;
-    cfg: MotionConfig -> v: (N, 3). This is the field the physics residuals constrain; it
+    cfg: MotionSpec -> v: (N, 3). This is the field the physics residuals constrain; it
     agrees with a particle's velocity (code frozen at E(gamma(x0)), VG-TRAJ) at t = 0.
     Non-finite or wrongly shaped input raises ValueError.
     """
@@ -40,7 +40,7 @@ def mlp_velocity(params, x, t, cfg):
     """v(x, t) = MLP_v([gamma(x), t]): the unconstrained velocity of the "no-pds" ablation (VG-VEL-MLP).
 
     params: dict with "velocity_mlp" (layers 3 (1 + 2 cfg.n_freqs_x) + 1 -> hidden^depth -> 3);
-    x: (N, 3) points; t: scalar time, any real value; cfg: MotionConfig -> v: (N, 3).
+    x: (N, 3) points; t: scalar time, any real value; cfg: MotionSpec -> v: (N, 3).
     No code and no basis: it moves positions only. Non-finite or wrongly shaped input
     raises ValueError.
     """

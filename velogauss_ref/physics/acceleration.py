@@ -24,7 +24,7 @@ def acceleration_field(params, x, t, cfg):
     when cfg.acc_form is "poly", R (K, 12) when it is "rigid", Q (2 ACC_HARMONICS + 1, K, 12)
     and the patterns' frequency Omega = params["time"][0][1] (VG-COEF-HARM) when it is
     "harmonic"); x: (N, 3) points; t: scalar
-    time, any real value; cfg: MotionConfig -> a: (N, 3), world units per unit of normalised
+    time, any real value; cfg: MotionSpec -> a: (N, 3), world units per unit of normalised
     time squared.
     alpha is masked by cfg.acc_mask (not cfg.mask: the acceleration of a masked velocity
     field can need columns the velocity lacks). An all-zero Q gives a = 0.

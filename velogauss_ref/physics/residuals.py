@@ -18,7 +18,7 @@ def transport_residual(params, x, t, cfg):
     """r = dv/dt + (grad v) v - a at each collocation point (VG-TRANSPORT; paper eq. 7).
 
     params: motion parameter dict; x: (N, 3) collocation points; t: scalar time, any real
-    value; cfg: MotionConfig -> r: (N, 3). (grad v)_ij = dv_i/dx_j of VG-FIELD, including
+    value; cfg: MotionSpec -> r: (N, 3). (grad v)_ij = dv_i/dx_j of VG-FIELD, including
     the dependence of the code on x; a from VG-ACC (masked by cfg.acc_mask). r = 0 where
     the field's material acceleration Dv/Dt is exactly the modelled a.
     Non-finite or wrongly shaped input raises ValueError.
@@ -33,7 +33,7 @@ def transport_residual(params, x, t, cfg):
 def divergence(params, x, t, cfg):
     """div v = trace(grad v) at each collocation point (VG-DIV; paper eq. 8).
 
-    params: motion parameter dict; x: (N, 3); t: scalar time; cfg: MotionConfig -> (N,).
+    params: motion parameter dict; x: (N, 3); t: scalar time; cfg: MotionSpec -> (N,).
     Equals w7 + w8 + w9 where the coefficients do not vary with x.
     Non-finite or wrongly shaped input raises ValueError.
     """

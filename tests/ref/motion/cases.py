@@ -10,7 +10,7 @@ import autograd.numpy as anp
 import numpy as np
 from autograd.misc import flatten
 
-from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, init_motion_params, mlp_layers, MotionConfig, network_shapes
+from velogauss_core.motion import COLUMN_GROUPS, N_BASIS, init_motion_params, mlp_layers, MotionSpec, network_shapes
 
 # Finite-difference step of the gradient checks that run through the networks
 # (check_grads_fd's default is 1e-6). At 1e-6 rounding of the differences (eps times the
@@ -43,7 +43,7 @@ TRANSLATION_MASK = column_mask("translation")
 
 
 def small_cfg(mask=None, **overrides):
-    return MotionConfig(**{**SMALL, **overrides}, mask=mask)
+    return MotionSpec(**{**SMALL, **overrides}, mask=mask)
 
 
 def random_params(seed, cfg, scale=1.0):

@@ -9,7 +9,7 @@ from hypothesis.extra import numpy as hnp
 from tests.ref.gradcheck import check_grads_fd
 from tests.ref.motion.cases import FD_STEP, RIGID_MASK, TRANSLATION_MASK, flat_params, random_params, small_cfg
 from velogauss_ref.motion import coefficients as coef_module
-from velogauss.scenes.motions import PeriodicFlowMotion, RigidMotion
+from velogauss.scenes.trajectories import PeriodicFlowMotion, RigidMotion
 from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
                                               rigid_velocity_patterns)
 from velogauss_ref.nn import mlp, positional_encoding

@@ -18,7 +18,7 @@ from velogauss_core.constants import ACC_POLY_DEGREE
 from velogauss_core.motion import init_motion_params
 from velogauss_ref.motion.code import physics_code
 from velogauss_ref.motion.coefficients import mixing_weights
-from velogauss.scenes.motions import LinearFlowMotion, PeriodicFlowMotion
+from velogauss.scenes.trajectories import LinearFlowMotion, PeriodicFlowMotion
 from velogauss_ref.physics.acceleration import acceleration_field, harmonic_patterns, rigid_patterns
 
 seeds = st.integers(0, 2**32 - 1)
