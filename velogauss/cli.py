@@ -16,7 +16,6 @@ environment (OMP_WAIT_POLICY, OMP_NUM_THREADS) says otherwise. `main`, the conso
 sets the wait policy before any command loads torch.
 """
 
-import inspect
 from pathlib import Path
 from typing import List, Optional
 
@@ -67,39 +66,39 @@ def main(args=None, prog_name=None):
 @app.command("make-scene")
 def make_scene_command(
     name: Optional[str] = typer.Argument(None, help="Scene name (see --list)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder (default: data/NAME)."),
-    resolution: int = typer.Option(128, help="Image width and height in pixels."),
-    views: int = typer.Option(8, help="Number of cameras on the ring (2 of them held out for evaluation)."),
-    times: int = typer.Option(21, help="Number of time steps in [0, 1]."),
-    seed: int = typer.Option(0, help="Seed of the camera placement and point cloud."),
-    monocular: bool = typer.Option(False, "--monocular", help="One train camera per time step (D-NeRF style)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output folder (default: data/NAME, data/random-SEED)."),
+    resolution: Optional[int] = typer.Option(None, help="Image width and height in pixels (default: 128)."),
+    views: Optional[int] = typer.Option(None, help="Cameras on the ring, 2 of them held out (default: 8)."),
+    times: Optional[int] = typer.Option(None, help="Number of time steps in [0, 1] (default: 21)."),
+    seed: Optional[int] = typer.Option(None, help="Seed of the camera placement and point cloud (default: 0)."),
+    monocular: Optional[bool] = typer.Option(None, "--monocular", help="One train camera per time step (D-NeRF style)."),
+    random_seed: Optional[int] = typer.Option(
+        None, "--random", metavar="SEED", help="Instead of NAME, draw scene SEED of the random family "
+                                               "(velogauss/scenes/family.py): size, cameras and frames are drawn too."),
     list_scenes: bool = typer.Option(False, "--list", help="List the scenes and their physical effects, then exit."),
 ):
     """Render a synthetic physics scene to disk in the D-NeRF layout (with ground truth in scene.json)."""
-    from velogauss.scenes import DEFAULT_SCENE, SCENES, make_scene
+    from velogauss.scenes import DEFAULT_SCENE, SCENES, make_random_scene, make_scene, scene_listing
 
     if list_scenes:
         typer.echo(scene_listing(SCENES, DEFAULT_SCENE))
         return
     with user_errors():
-        if name is None:
-            raise ValueError(f"NAME: missing scene name; choose one of {', '.join(SCENES)} (see --list)")
-        out = out or Path("data") / name
-        path = make_scene(name, out, resolution=resolution, n_views=views, n_times=times, seed=seed,
-                          layout="monocular" if monocular else "multiview")
+        if (name is None) == (random_seed is None):
+            raise ValueError(f"NAME: give one scene name or --random SEED; scenes: {', '.join(SCENES)} (see --list)")
+        if random_seed is not None:
+            given = [flag for flag, value in (("--resolution", resolution), ("--views", views), ("--times", times),
+                                              ("--seed", seed), ("--monocular", monocular)) if value is not None]
+            if given or random_seed < 0:
+                raise ValueError(f"--random: expected a seed >= 0 alone (the family draws size, cameras and frames), "
+                                 f"got {random_seed}" + (f" with {', '.join(given)}" if given else ""))
+            name = f"random-{random_seed}"
+            path = make_random_scene(random_seed, out or Path("data") / name)
+        else:
+            path = make_scene(name, out or Path("data") / name, resolution=128 if resolution is None else resolution,
+                              n_views=8 if views is None else views, n_times=21 if times is None else times,
+                              seed=seed or 0, layout="monocular" if monocular else "multiview")
     typer.echo(f"wrote scene {name!r} to {path}")
-
-
-def scene_listing(scenes, default):
-    """One line per scene: name, effects, compressibility and what moves (its builder's docstring)."""
-    lines = []
-    for key, build in scenes.items():
-        scene = build()
-        doc = (inspect.getdoc(build) or "").splitlines()[0]
-        tag = " (default)" if key == default else ""
-        kind = "incompressible" if scene.incompressible else "compressible"
-        lines.append(f"{key + tag:<18} effects: {', '.join(scene.effects):<34} {kind:<15} {doc}")
-    return "\n".join(lines)
 
 
 # --- train -----------------------------------------------------------------------------

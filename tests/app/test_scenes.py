@@ -9,7 +9,8 @@ from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.scenes import DEFAULT_SCENE, EFFECTS, SCENES, load_ground_truth, make_scene
 from velogauss.scenes.bodies import Body, Texture
 from velogauss.scenes.trajectories import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
-from velogauss.scenes.raycast import cast_rays, intersect_primitive, shade, world_normal
+from velogauss.scenes.raycast import (cast_rays, intersect_primitive, primitive_normal, shade, snap_to_surface,
+                                      world_normal)
 from velogauss.scenes.scene import AnalyticScene
 
 # Closed-form intersections evaluated in float64: agreement to rounding.
@@ -28,6 +29,12 @@ def _interior_points(body, n, rng):
         p *= 0.9
     L, o = body.to_world(0.0)
     return p @ L.T + o
+
+
+def _tilt_matrix(rotvec):
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(rotvec).as_matrix()
 
 
 def _solid_bodies(scene):
@@ -63,6 +70,71 @@ def test_plane_square_hits():
     s = intersect_primitive("plane", origins, dirs)
     np.testing.assert_allclose(s[0], 2.0, atol=TIGHT)
     assert s[1] == np.inf and s[2] == np.inf  # outside the square; parallel to it
+
+
+def test_unit_cylinder_side_cap_and_axis_hits():
+    origins = np.array([[5.0, 0.0, 0.3], [0.2, 0.1, 5.0], [2.0, 0.0, 5.0], [0.5, 0.0, 5.0], [0.0, 0.0, 0.0],
+                        [5.0, 0.0, 1.5], [5.0, 0.0, 1.0], [0.0, 0.0, 0.5]])
+    dirs = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0],
+                     [-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.6, 0.8]])
+    s = intersect_primitive("cylinder", origins, dirs)
+    # Side x = 1 after 4; top cap after 4; along the axis outside the side: miss; inside: the cap after 4;
+    # from the centre: the side at 1; above the top: miss; in the cap's plane: miss; from inside
+    # upwards: the cap z = 1 at s = 0.5 / 0.8 before the side at s = 1 / 0.6.
+    np.testing.assert_allclose(s[[0, 1, 3, 4, 7]], [4.0, 4.0, 4.0, 1.0, 0.625], atol=TIGHT)
+    assert s[2] == np.inf and s[5] == np.inf and s[6] == np.inf
+    hit = snap_to_surface("cylinder", origins[[0, 1, 7]] + s[[0, 1, 7], None] * dirs[[0, 1, 7]])
+    np.testing.assert_allclose(primitive_normal("cylinder", hit), [[1, 0, 0], [0, 0, 1], [0, 0, 1]], atol=TIGHT)
+
+
+def test_cylinder_body_box_distance_and_surface_samples(rng):
+    body = Body("can", "cylinder", (0.3, -0.2, 0.1), (0.4, 0.25, 0.5), _tilt_matrix((0.4, -0.3, 0.7)),
+                Texture("stripes", ((1, 0, 0), (0, 0, 1))),
+                LinearFlowMotion((0.0, 0.0, 0.0), [[0.2, 0.3, 0.0], [0.3, -0.1, 0.0], [0.0, 0.0, -0.1]]))
+    t = 0.6
+    p, normals = body.sample_surface(4000, rng)
+    radius, height = np.linalg.norm(p[:, :2], axis=1), np.abs(p[:, 2])
+    assert np.all(np.isclose(radius, 1.0) | np.isclose(height, 1.0)) and np.all((radius <= 1 + TIGHT) & (height <= 1))
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
+    L, o = body.to_world(t)
+    world = p @ L.T + o
+    box = body.aabb(t)
+    assert np.all(world >= box[0] - TIGHT) and np.all(world <= box[1] + TIGHT)
+    # The box is tight: dense surface samples come within 2 % of its faces.
+    np.testing.assert_allclose(world.min(axis=0), box[0], atol=0.02 * np.ptp(box, axis=0).max())
+    np.testing.assert_allclose(world.max(axis=0), box[1], atol=0.02 * np.ptp(box, axis=0).max())
+    np.testing.assert_array_equal(body.outside_distance(0.9 * (world - o) + o, t), 0.0)
+    outside = rng.uniform(-2.0, 2.0, size=(300, 3))
+    nearest = np.linalg.norm(outside[:, None] - world[None], axis=2).min(axis=1)
+    assert np.all(body.outside_distance(outside, t) <= nearest + 1e-9)  # a lower bound of the distance
+
+
+def test_a_cylinder_seen_end_on_and_side_on():
+    plain = Texture("checker", ((1, 0, 0), (0, 1, 0)))
+    can = Body("can", "cylinder", (0.0, 0.0, 0.0), (0.3, 0.3, 0.6), np.eye(3), plain,
+               RigidMotion((0.0, 0.0, 0.0), omega=(np.pi / 2, 0.0, 0.0)))
+    origins, dirs = np.array([[0.0, 0.0, 5.0], [0.0, -5.0, 0.0]]), np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    # At t = 0 the axis is z (the cap faces up, the side faces -y); a quarter turn about x later, the axis is y.
+    np.testing.assert_allclose(cast_rays([can], origins, dirs, 0.0).distance, [4.4, 4.7], atol=TIGHT)
+    np.testing.assert_allclose(cast_rays([can], origins, dirs, 1.0).distance, [4.7, 4.4], atol=TIGHT)
+
+
+def test_still_bodies_cast_once_give_the_same_hits_as_all_at_once():
+    scene = SCENES["multi"]()
+    camera = Camera(look_at((3.0, -2.5, 1.5), (0.0, 0.0, -0.2)), intrinsics_from_fov(0.7, 24, 20), 24, 20)
+    origins, dirs = camera.pixel_rays(2)
+    origins, dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
+    still = [k for k, b in enumerate(scene.bodies) if isinstance(b.motion, StaticMotion)]
+    moving = [k for k in range(len(scene.bodies)) if k not in still]
+    background = cast_rays(scene.bodies, camera.centre, dirs, 0.0, only=still)
+    for t in (0.2, 0.9):
+        full = cast_rays(scene.bodies, camera.centre, dirs, t)
+        split = cast_rays(scene.bodies, camera.centre, dirs, t, only=moving, start=background)
+        per_ray = cast_rays(scene.bodies, origins, dirs, t)  # one origin per ray: the same to rounding
+        for field in ("distance", "body", "point", "normal", "shading_normal"):
+            np.testing.assert_array_equal(getattr(split, field), getattr(full, field))
+            np.testing.assert_allclose(getattr(per_ray, field), getattr(full, field), atol=TIGHT)
+        np.testing.assert_array_equal(scene.render_sequence(camera, [t], 2)[0], scene.render(camera, t, 2))
 
 
 def test_cast_through_moving_and_stretched_bodies_matches_the_moved_shape():

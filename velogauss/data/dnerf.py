@@ -17,7 +17,9 @@ Layout (paths relative to the scene folder):
   are divided by their type's maximum. Alpha is composited over `background`:
   `rgb·a + background·(1 − a)`.
 - Optional `points3d.ply` (initial point cloud) and `scene.json` (metadata written by
-  `velogauss.scenes.writer`; its `bounds` are the scene's box).
+  `velogauss.scenes.writer`; its `bounds` are the scene's box; its optional `max_time`, the
+  scene's own observed window's end, and `background`, its own RGB background, apply where
+  the caller gives none or the default, DEFAULT_MAX_TIME and DEFAULT_BACKGROUND).
 
 Splits (`split`), with `max_time` the end of the observed window:
 
@@ -50,6 +52,8 @@ from velogauss_core.constants import SSIM_WINDOW
 _SPLIT_FILES = {"train": "transforms_train.json", "val": "transforms_val.json", "test": "transforms_test.json"}
 # The observed window's end when none is given; under "future:F" a max_time equal to it counts as not given.
 DEFAULT_MAX_TIME = 0.75
+# The colour under transparent pixels when none is given (D-NeRF's white background).
+DEFAULT_BACKGROUND = (1.0, 1.0, 1.0)
 # `split`'s "future:F", F a decimal strictly inside (0, 1), as velogauss.config's data.split allows.
 _FUTURE_SPLIT = re.compile(r"future:(0?\.[0-9]*[1-9][0-9]*)")
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -103,16 +107,18 @@ class SceneData:
         return self.train[0].camera.height
 
 
-def load_scene(path, max_time=None, half_res=False, background=(1.0, 1.0, 1.0), split="time"):
+def load_scene(path, max_time=None, half_res=False, background=None, split="time"):
     """Load and validate a D-NeRF/NVFi scene folder into a `SceneData`.
 
     `path`: the scene folder. `split`: "time" or "future:F" (module docstring). `max_time`
-    in (0, 1): end of the observed window; None: DEFAULT_MAX_TIME under "time", derived under
-    "future:F", where a number other than DEFAULT_MAX_TIME must equal the derived end (a
-    run's config.toml records it; anything else would be two windows at once).
-    `half_res`: halve the resolution by 2×2 area averaging of the composited images
-    (odd trailing rows/columns cropped; `fx, fy, cx, cy` halved). `background (3,)` in
-    [0, 1]: colour behind transparent pixels.
+    in (0, 1): end of the observed window; None: under "time" scene.json's `max_time` if it
+    records one, else DEFAULT_MAX_TIME (which, given, counts as None, as a config cannot tell
+    it from its default); derived under "future:F", where a number other than DEFAULT_MAX_TIME
+    must equal the derived end (a run's config.toml records it; anything else would be two
+    windows at once). `half_res`: halve the resolution by 2×2 area averaging of the composited
+    images (odd trailing rows/columns cropped; `fx, fy, cx, cy` halved). `background (3,)` in
+    [0, 1]: colour behind transparent pixels; None (or DEFAULT_BACKGROUND): scene.json's
+    `background` if it records one, else DEFAULT_BACKGROUND.
 
     Every file is read and checked up front; the first problem raises one `DataError`
     naming the file and field: missing file or key, unreadable image, images of different
@@ -125,12 +131,18 @@ def load_scene(path, max_time=None, half_res=False, background=(1.0, 1.0, 1.0), 
     fraction = _check_split(split)
     if max_time is not None or fraction is None:
         max_time = _check_max_time(DEFAULT_MAX_TIME if max_time is None else max_time)
-    background = _check_background(background)
+    background = _check_background(DEFAULT_BACKGROUND if background is None else background)
     if not isinstance(half_res, (bool, np.bool_)):
         raise DataError(None, "half_res", f"expected True or False, got {half_res!r}")
     root = Path(path)
     if not root.is_dir():
         raise DataError(root, "path", "scene folder does not exist")
+    metadata = _read_metadata(root / "scene.json")
+    own = metadata or {}
+    if fraction is None and max_time == DEFAULT_MAX_TIME and "max_time" in own:
+        max_time = own["max_time"]
+    if np.array_equal(background, np.float32(DEFAULT_BACKGROUND)) and "background" in own:
+        background = own["background"]
     records = {}
     for part, name in _SPLIT_FILES.items():
         file = root / name
@@ -146,7 +158,6 @@ def load_scene(path, max_time=None, half_res=False, background=(1.0, 1.0, 1.0), 
         train, interpolation, extrapolation = _split_time(root, records, max_time)
 
     cloud = read_ply(root / "points3d.ply") if (root / "points3d.ply").is_file() else None
-    metadata = _read_metadata(root / "scene.json")
 
     size = None
     loaded = {}
@@ -461,4 +472,15 @@ def _read_metadata(file):
         if np.any(bounds[0] > bounds[1]):
             raise DataError(file, "bounds", f"min {bounds[0].tolist()} exceeds max {bounds[1].tolist()}")
         meta["bounds"] = bounds
+    if "max_time" in meta:
+        value = meta["max_time"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 < value < 1.0:
+            raise DataError(file, "max_time", f"expected a number in (0, 1), got {value!r}")
+        meta["max_time"] = float(value)
+    if "background" in meta:
+        try:
+            meta["background"] = _check_background(meta["background"])
+        except (TypeError, ValueError):  # NumPy's, for values that are not numbers
+            raise DataError(file, "background",
+                            f"expected an RGB triple in [0, 1], got {meta['background']!r}") from None
     return meta

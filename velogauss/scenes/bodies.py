@@ -1,11 +1,12 @@
 """Textured analytic bodies: a primitive placed at t = 0, a body-frame texture and a motion.
 
 Primitive coordinates `p` describe a body independently of its size and motion:
-`ellipsoid` is the unit ball `|p| ≤ 1`, `box` the cube `max |p_i| ≤ 1`, `plane` the square
-`|p_x|, |p_y| ≤ 1, p_z = 0`. The placement maps them to canonical (t = 0 world)
-coordinates, `x0 = P p + c` with `P = rotation · diag(size)`, and the motion to world
-coordinates at t, so `x = L(t) p + o(t)` with `L = A P`, `o = A c + b`. Textures are
-functions of `p`: they are painted on the material and move, rotate and stretch with it.
+`ellipsoid` is the unit ball `|p| ≤ 1`, `box` the cube `max |p_i| ≤ 1`, `cylinder` the solid
+`p_x² + p_y² ≤ 1, |p_z| ≤ 1` (axis p_z), `plane` the square `|p_x|, |p_y| ≤ 1, p_z = 0`. The
+placement maps them to canonical (t = 0 world) coordinates, `x0 = P p + c` with
+`P = rotation · diag(size)`, and the motion to world coordinates at t, so `x = L(t) p + o(t)`
+with `L = A P`, `o = A c + b`. Textures are functions of `p`: they are painted on the
+material and move, rotate and stretch with it.
 """
 
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from velogauss.scenes.trajectories import Motion, motion_from_dict
 from velogauss_core.checks import check_array
 from velogauss_core.constants import POSE_ORTHONORMAL_TOL
 
-PRIMITIVES = ("ellipsoid", "box", "plane")
+PRIMITIVES = ("ellipsoid", "box", "cylinder", "plane")
 TEXTURES = ("checker", "stripes", "gradient")
 
 
@@ -50,7 +51,7 @@ class Texture:
             w = np.clip(0.5 * (p[:, self.axis] + 1.0), 0.0, 1.0)[:, None]
             return (1.0 - w) * self.colors[0] + w * self.colors[1]
         cells = np.floor(self.frequency * p)
-        parity = (cells.sum(axis=1) if self.kind == "checker" else cells[:, self.axis]) % 2
+        parity = (cells[:, 0] + cells[:, 1] + cells[:, 2] if self.kind == "checker" else cells[:, self.axis]) % 2
         return np.where(parity[:, None] == 0, self.colors[0], self.colors[1])
 
     def to_dict(self):
@@ -103,9 +104,10 @@ class Body:
         """A lower bound `(N,)` of the world distance from `x (N, 3)` to the body at time t; 0 inside.
 
         In primitive space the distance to the solid is at least
-        `max(0, |p| − 1)` (ellipsoid, exact), `max(0, max_i |p_i| − 1)` (box) or
-        `max(0, |p_x| − 1, |p_y| − 1, |p_z|)` (plane); a linear map shrinks distances by at
-        most its smallest singular value, which converts it to world units.
+        `max(0, |p| − 1)` (ellipsoid, exact), `max(0, max_i |p_i| − 1)` (box),
+        `max(0, |p_xy| − 1, |p_z| − 1)` (cylinder) or `max(0, |p_x| − 1, |p_y| − 1, |p_z|)`
+        (plane); a linear map shrinks distances by at most its smallest singular value, which
+        converts it to world units.
         """
         p = self.to_primitive(x, t)
         a = np.abs(p)
@@ -113,6 +115,8 @@ class Body:
             d = np.linalg.norm(p, axis=1) - 1.0
         elif self.primitive == "box":
             d = a.max(axis=1) - 1.0
+        elif self.primitive == "cylinder":
+            d = np.maximum(np.linalg.norm(p[:, :2], axis=1), a[:, 2]) - 1.0
         else:
             d = np.maximum(np.maximum(a[:, 0], a[:, 1]) - 1.0, a[:, 2])
         L, _ = self.to_world(t)
@@ -122,22 +126,20 @@ class Body:
         """The exact axis-aligned box `(2, 3)` of the body at time t.
 
         The image of the unit ball under `p ↦ L p + o` spans `o ± ‖L_i‖₂` along axis i; the
-        image of the cube spans `o ± Σ_j |L_ij|`; the square drops p_z.
+        image of the cube spans `o ± Σ_j |L_ij|`; the cylinder, a disc swept along p_z, spans
+        `o ± (‖(L_i0, L_i1)‖₂ + |L_i2|)`; the square drops p_z.
         """
         L, o = self.to_world(t)
-        if self.primitive == "ellipsoid":
-            half = np.linalg.norm(L, axis=1)
-        elif self.primitive == "box":
-            half = np.abs(L).sum(axis=1)
-        else:
-            half = np.abs(L[:, :2]).sum(axis=1)
+        half = half_extent(self.primitive, L)
         return np.stack([o - half, o + half])
 
     def sample_surface(self, n, rng):
         """`n` primitive-space surface points `(n, 3)` and outward primitive normals `(n, 3)`.
 
         Ellipsoid: uniform directions on the unit sphere. Box: faces drawn in proportion to
-        their area at t = 0, uniform on each. Plane: uniform on the square, normal +z.
+        their area at t = 0, uniform on each. Cylinder: side or caps in proportion to their
+        approximate areas at t = 0, uniform in angle and height on the side, in area on the caps.
+        Plane: uniform on the square, normal +z.
         """
         if self.primitive == "ellipsoid":
             p = rng.normal(size=(n, 3))
@@ -146,6 +148,8 @@ class Body:
         if self.primitive == "plane":
             p = np.concatenate([rng.uniform(-1.0, 1.0, size=(n, 2)), np.zeros((n, 1))], axis=1)
             return p, np.tile([0.0, 0.0, 1.0], (n, 1))
+        if self.primitive == "cylinder":
+            return _cylinder_surface(self.size, n, rng)
         s = self.size
         face_areas = np.array([s[1] * s[2], s[0] * s[2], s[0] * s[1]])
         axis = rng.choice(3, size=n, p=face_areas / face_areas.sum())
@@ -161,6 +165,36 @@ class Body:
         return {"name": self.name, "primitive": self.primitive, "centre": self.centre.tolist(),
                 "size": self.size.tolist(), "rotation": self.rotation.tolist(),
                 "texture": self.texture.to_dict(), "motion": self.motion.to_dict()}
+
+
+def half_extent(primitive, L):
+    """Half-widths `(..., 3)` along the world axes of `primitive`'s image under `p ↦ L p`, `L (..., 3, 3)`
+    (see `Body.aabb`)."""
+    if primitive == "ellipsoid":
+        return np.linalg.norm(L, axis=-1)
+    if primitive == "box":
+        return np.abs(L).sum(axis=-1)
+    if primitive == "cylinder":
+        return np.linalg.norm(L[..., :2], axis=-1) + np.abs(L[..., 2])
+    return np.abs(L[..., :2]).sum(axis=-1)
+
+
+def cylinder_areas(size):
+    """Approximate `(side, both caps)` areas of a cylinder of radii `size[:2]` and half-height `size[2]`
+    (the side's perimeter by the quadratic mean of the radii)."""
+    a, b, c = size
+    return 2.0 * np.pi * np.sqrt(0.5 * (a * a + b * b)) * 2.0 * c, 2.0 * np.pi * a * b
+
+
+def _cylinder_surface(size, n, rng):
+    side, caps = cylinder_areas(size)
+    on_side = rng.uniform(size=n) < side / (side + caps)
+    angle = rng.uniform(0.0, 2.0 * np.pi, size=n)
+    radius = np.where(on_side, 1.0, np.sqrt(rng.uniform(size=n)))  # sqrt: uniform in the disc's area
+    z = np.where(on_side, rng.uniform(-1.0, 1.0, size=n), rng.choice([-1.0, 1.0], size=n))
+    p = np.stack([radius * np.cos(angle), radius * np.sin(angle), z], axis=1)
+    normals = np.where(on_side[:, None], p * [1.0, 1.0, 0.0], p * [0.0, 0.0, 1.0])
+    return p, normals
 
 
 def body_from_dict(description):

@@ -31,6 +31,7 @@ and gravity, so the future frames separate physically consistent extrapolation (
 parabola) from constant-velocity guesses, yet it trains in minutes on a CPU.
 """
 
+import inspect
 import json
 from pathlib import Path
 
@@ -140,6 +141,18 @@ def pulse():
 SCENES = {"spin": spin, "toss": toss, "multi": multi, "stretch": stretch, "shear": shear, "grow": grow,
           "pulse": pulse}
 DEFAULT_SCENE = "toss"
+
+
+def scene_listing(scenes, default):
+    """One line per scene: name, effects, compressibility and what moves (its builder's docstring)."""
+    lines = []
+    for key, build in scenes.items():
+        scene = build()
+        doc = (inspect.getdoc(build) or "").splitlines()[0]
+        tag = " (default)" if key == default else ""
+        kind = "incompressible" if scene.incompressible else "compressible"
+        lines.append(f"{key + tag:<18} effects: {', '.join(scene.effects):<34} {kind:<15} {doc}")
+    return "\n".join(lines)
 
 
 def load_ground_truth(scene_dir):

@@ -12,8 +12,8 @@ unambiguous there.
 
 import numpy as np
 
-from velogauss.scenes.bodies import body_from_dict
-from velogauss.scenes.raycast import render_rgba, shade, world_normal
+from velogauss.scenes.bodies import body_from_dict, cylinder_areas
+from velogauss.scenes.raycast import render_rgba, render_sequence, shade, world_normal
 from velogauss_core.checks import check_array, check_scalar
 from velogauss_core.motion import EFFECTS
 
@@ -87,6 +87,11 @@ class AnalyticScene:
         """RGBA image `(H, W, 4)` of the scene at time t (see `raycast.render_rgba`)."""
         return render_rgba(self.bodies, camera, check_scalar("t", t), self.light, self.ambient, supersample)
 
+    def render_sequence(self, camera, times, supersample=1):
+        """RGBA images `(H, W, 4)` of the scene at each of `times` (a list), seen by one camera."""
+        times = [check_scalar("t", t) for t in times]
+        return render_sequence(self.bodies, camera, times, self.light, self.ambient, supersample)
+
     def sample_surface(self, n_points, rng):
         """`n_points` points on the bodies' surfaces at t = 0, shared in proportion to their
         approximate areas (box of `size`); returns world points, shaded colours and unit
@@ -137,6 +142,8 @@ def _approximate_area(body):
     a, b, c = body.size
     if body.primitive == "plane":
         return 4.0 * a * b
+    if body.primitive == "cylinder":
+        return sum(cylinder_areas(body.size))
     box_area = 8.0 * (a * b + b * c + a * c)
     # A sphere's area is pi/6 of its bounding cube's; used for ellipsoids as well.
     return box_area * np.pi / 6.0 if body.primitive == "ellipsoid" else box_area

@@ -9,7 +9,9 @@ fields of the world point `x`:
     a(x, t) = Ä A⁻¹ (x − b) + b̈        (material acceleration Dv/Dt)
 
 so every body's motion is exactly one point of the paper's 12-dimensional affine basis
-(VG-BASIS) at each time: see `basis_coefficients`.
+(VG-BASIS) at each time: see `basis_coefficients`. `BounceMotion` is smooth between bounces
+only: its position is continuous, its rate jumps at a bounce and is reported just after it.
+`MOTIONS` maps each `to_dict()["type"]` to its class.
 """
 
 import numpy as np
@@ -17,6 +19,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
 from velogauss_core.checks import check_array, check_scalar
+from velogauss_core.constants import POSE_ORTHONORMAL_TOL
 
 
 def _vec(name, value):
@@ -215,21 +218,235 @@ class PeriodicFlowMotion(Motion):
                 "omega": self.omega}
 
 
+class OrbitMotion(Motion):
+    """A body whose centre orbits a pivot while the body spins at a rate of its own.
+
+    `x(t) = R_s(t) (x0 − c0) + c(t)`, `c(t) = p + R_o(t) (c0 − p)`, with `R_o(t) = exp(t [Ω]×)`,
+    `R_s(t) = exp(t [ω]×)`. `pivot p (3,)`, `centre c0 (3,)` the body's centre at t = 0,
+    `orbit Ω (3,)` and `spin ω (3,)` angular velocities in rad per unit time (the spin is
+    about the body's centre, along a world-fixed axis). Velocity `ω × (x − c) + Ω × (c − p)`.
+    """
+
+    def __init__(self, pivot, centre, orbit, spin=(0.0, 0.0, 0.0)):
+        self.pivot = _vec("pivot", pivot)
+        self.centre = _vec("centre", centre)
+        self.orbit = _vec("orbit", orbit)
+        self.spin = _vec("spin", spin)
+
+    def _state(self, t):
+        R_o = Rotation.from_rotvec(self.orbit * t).as_matrix()
+        R_s = Rotation.from_rotvec(self.spin * t).as_matrix()
+        return R_s, R_o @ (self.centre - self.pivot)
+
+    def affine(self, t):
+        R_s, arm = self._state(t)
+        # Grouped so that b(0) = 0 exactly: the arm's turn, then the spin about the centre.
+        return R_s, (arm - (self.centre - self.pivot)) + (self.centre - R_s @ self.centre)
+
+    def rate(self, t):
+        R_s, arm = self._state(t)
+        R_dot = _cross_matrix(self.spin) @ R_s
+        return R_dot, np.cross(self.orbit, arm) - R_dot @ self.centre
+
+    def second_rate(self, t):
+        R_s, arm = self._state(t)
+        W = _cross_matrix(self.spin)
+        R_ddot = W @ W @ R_s
+        return R_ddot, np.cross(self.orbit, np.cross(self.orbit, arm)) - R_ddot @ self.centre
+
+    def to_dict(self):
+        return {"type": "orbit", "pivot": self.pivot.tolist(), "centre": self.centre.tolist(),
+                "orbit": self.orbit.tolist(), "spin": self.spin.tolist()}
+
+
+class PendulumMotion(Motion):
+    """A rigid swing about a fixed hinge: the angle about the hinge axis is `θ(t) = θ0 cos(ω t + φ)`.
+
+    `x(t) = h + R(t) (x0 − h)`, `R(t)` the rotation by `θ(t) − θ(0)` about the unit axis `n`
+    (the body's pose at t = 0 is the one at angle θ(0)). `hinge h (3,)`, `axis (3,)` (any
+    non-zero length; normalised), `amplitude θ0` rad, `omega ω` rad per unit time, `phase φ`
+    rad. Velocity `θ̇ n × (x − h)`; `Ä = (θ̈ [n]× + θ̇² [n]×²) R`.
+    """
+
+    def __init__(self, hinge, axis, amplitude, omega, phase=0.0):
+        self.hinge = _vec("hinge", hinge)
+        self.axis = _vec("axis", axis)
+        if not np.linalg.norm(self.axis) > 0:
+            raise ValueError("axis: must be non-zero")
+        self.amplitude = float(check_scalar("amplitude", amplitude))
+        self.omega = float(check_scalar("omega", omega))
+        self.phase = float(check_scalar("phase", phase))
+        self._n = _cross_matrix(self.axis / np.linalg.norm(self.axis))
+
+    def _angles(self, t):
+        """`(θ(t) − θ(0), θ̇, θ̈)`."""
+        wt = self.omega * t + self.phase
+        th = self.amplitude
+        return (th * (np.cos(wt) - np.cos(self.phase)), -th * self.omega * np.sin(wt),
+                -th * self.omega ** 2 * np.cos(wt))
+
+    def _rotation(self, angle):
+        N = self._n
+        return np.eye(3) + np.sin(angle) * N + (1.0 - np.cos(angle)) * N @ N
+
+    def affine(self, t):
+        R = self._rotation(self._angles(t)[0])
+        return R, self.hinge - R @ self.hinge
+
+    def rate(self, t):
+        angle, speed, _ = self._angles(t)
+        R_dot = speed * self._n @ self._rotation(angle)
+        return R_dot, -R_dot @ self.hinge
+
+    def second_rate(self, t):
+        angle, speed, accel = self._angles(t)
+        R_ddot = (accel * self._n + speed ** 2 * self._n @ self._n) @ self._rotation(angle)
+        return R_ddot, -R_ddot @ self.hinge
+
+    def to_dict(self):
+        return {"type": "pendulum", "hinge": self.hinge.tolist(), "axis": self.axis.tolist(),
+                "amplitude": self.amplitude, "omega": self.omega, "phase": self.phase}
+
+
+class OscillatingStretchMotion(Motion):
+    """A stretch along three orthogonal axes, each oscillating with its own phase.
+
+    `x(t) = c + Q diag(e_i(t)) Qᵀ (x0 − c)` with `e_i(t) = exp(k_i (sin(ω t + φ_i) − sin φ_i))`
+    (so `e_i(0) = 1`). `centre c (3,)`, `axes Q (3, 3)` (columns: the stretch axes, a rotation),
+    `amplitude k (3,)` in log-stretch units, `omega ω` rad per unit time, `phase φ (3,)` rad.
+    Volume changes as `Π e_i`, so the motion is compressible unless the phases agree and Σ k_i = 0.
+    """
+
+    def __init__(self, centre, axes, amplitude, omega, phase=(0.0, 0.0, 0.0)):
+        self.centre = _vec("centre", centre)
+        self.axes = np.array(check_array("axes", np.asarray(axes, dtype=np.float64), (3, 3)))
+        if np.max(np.abs(self.axes.T @ self.axes - np.eye(3))) > POSE_ORTHONORMAL_TOL:
+            raise ValueError("axes: expected orthonormal columns")
+        self.amplitude = _vec("amplitude", amplitude)
+        self.omega = float(check_scalar("omega", omega))
+        self.phase = _vec("phase", phase)
+
+    def _factors(self, t):
+        """`(e, ė, ë)`, each (3,)."""
+        wt = self.omega * t + self.phase
+        k, w = self.amplitude, self.omega
+        e = np.exp(k * (np.sin(wt) - np.sin(self.phase)))
+        return e, e * k * w * np.cos(wt), e * (k * k * w * w * np.cos(wt) ** 2 - k * w * w * np.sin(wt))
+
+    def _matrix(self, diagonal):
+        return (self.axes * diagonal) @ self.axes.T
+
+    def affine(self, t):
+        A = np.eye(3) + self._matrix(self._factors(t)[0] - 1.0)  # I + Q (e − 1) Qᵀ: exactly I at t = 0
+        return A, self.centre - A @ self.centre
+
+    def rate(self, t):
+        A_dot = self._matrix(self._factors(t)[1])
+        return A_dot, -A_dot @ self.centre
+
+    def second_rate(self, t):
+        A_ddot = self._matrix(self._factors(t)[2])
+        return A_ddot, -A_ddot @ self.centre
+
+    def to_dict(self):
+        return {"type": "oscillating_stretch", "centre": self.centre.tolist(), "axes": self.axes.tolist(),
+                "amplitude": self.amplitude.tolist(), "omega": self.omega, "phase": self.phase.tolist()}
+
+
+class BounceMotion(Motion):
+    """A body thrown under gravity that bounces on a horizontal floor, spinning about the vertical.
+
+    The centre `c(t) = c0 + (u_x t, u_y t, z(t) − z0)`: `z` follows `z0 + u_z t − g t²/2` down to
+    the contact height `floor`, then parabolas whose launch speed is the impact speed times the
+    `restitution e`; after the bounces' total time `t1 + 2 v1 / (g (1 − e))` (t1 the first impact,
+    v1 the first rebound speed) it rests at the floor. The body turns at `spin` rad per unit time
+    about the vertical through its centre, which keeps its height, so it touches the floor at
+    each bounce when `floor` is the centre's height above the ground at contact.
+    `x(t) = R_z(spin t) (x0 − c0) + c(t)`. The position is continuous; the vertical velocity
+    jumps from −v to e·v at a bounce, and at a bounce instant the motion reports the velocity just
+    after it. `centre c0 (3,)`, `velocity u (3,)` at t = 0, `gravity g > 0` (along −z),
+    `floor ≤ c0_z`, `restitution e` in [0, 1).
+    """
+
+    def __init__(self, centre, velocity, gravity, floor, restitution, spin=0.0):
+        self.centre = _vec("centre", centre)
+        self.velocity0 = _vec("velocity", velocity)
+        self.gravity = float(check_scalar("gravity", gravity))
+        self.floor = float(check_scalar("floor", floor))
+        self.restitution = float(check_scalar("restitution", restitution))
+        self.spin = float(check_scalar("spin", spin))
+        if not self.gravity > 0:
+            raise ValueError(f"gravity: expected > 0, got {gravity!r}")
+        if not 0.0 <= self.restitution < 1.0:
+            raise ValueError(f"restitution: expected a value in [0, 1), got {restitution!r}")
+        if not self.floor <= self.centre[2]:
+            raise ValueError(f"floor: must not be above the centre's height {self.centre[2]}, got {floor!r}")
+
+    def first_impact(self):
+        """The time of the first bounce and the rebound speed after it."""
+        g, w, drop = self.gravity, self.velocity0[2], self.centre[2] - self.floor
+        speed = np.sqrt(w * w + 2.0 * g * drop)
+        return (w + speed) / g, self.restitution * speed
+
+    def vertical(self, t):
+        """`(z, ż, z̈)` of the centre at time t."""
+        g, z0, w = self.gravity, self.centre[2], self.velocity0[2]
+        start, speed = self.first_impact()
+        if t < start:
+            return z0 + w * t - 0.5 * g * t * t, w - g * t, -g
+        rest = start + 2.0 * speed / (g * (1.0 - self.restitution))
+        while t < rest and speed > 0:
+            flight = 2.0 * speed / g
+            if t < start + flight:
+                s = t - start
+                return self.floor + speed * s - 0.5 * g * s * s, speed - g * s, -g
+            start, speed = start + flight, speed * self.restitution
+        return self.floor, 0.0, 0.0
+
+    def _spin(self, t):
+        c, s = np.cos(self.spin * t), np.sin(self.spin * t)
+        W = _cross_matrix([0.0, 0.0, self.spin])
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), W
+
+    def affine(self, t):
+        R, _ = self._spin(t)
+        z, _, _ = self.vertical(t)
+        c = self.centre + self.velocity0 * t
+        c[2] = z
+        return R, c - R @ self.centre
+
+    def rate(self, t):
+        R, W = self._spin(t)
+        R_dot = W @ R
+        c_dot = self.velocity0.copy()
+        c_dot[2] = self.vertical(t)[1]
+        return R_dot, c_dot - R_dot @ self.centre
+
+    def second_rate(self, t):
+        R, W = self._spin(t)
+        R_ddot = W @ W @ R
+        return R_ddot, np.array([0.0, 0.0, self.vertical(t)[2]]) - R_ddot @ self.centre
+
+    def to_dict(self):
+        return {"type": "bounce", "centre": self.centre.tolist(), "velocity": self.velocity0.tolist(),
+                "gravity": self.gravity, "floor": self.floor, "restitution": self.restitution, "spin": self.spin}
+
+
 def motion_from_dict(description):
     """Rebuild a motion from `Motion.to_dict()`; raises ValueError naming `description`."""
     if not isinstance(description, dict) or "type" not in description:
         raise ValueError(f"description: expected a dict with a 'type', got {description!r}")
     kind = description["type"]
     args = {k: v for k, v in description.items() if k != "type"}
+    if kind not in MOTIONS:
+        raise ValueError(f"description: unknown motion type {kind!r} ({', '.join(MOTIONS)})")
     try:
-        if kind == "static":
-            return StaticMotion(**args)
-        if kind == "rigid":
-            return RigidMotion(**args)
-        if kind == "linear_flow":
-            return LinearFlowMotion(**args)
-        if kind == "periodic_flow":
-            return PeriodicFlowMotion(**args)
+        return MOTIONS[kind](**args)
     except TypeError as err:
         raise ValueError(f"description: bad fields for a {kind!r} motion ({err})") from None
-    raise ValueError(f"description: unknown motion type {kind!r} (static, rigid, linear_flow, periodic_flow)")
+
+
+# Each motion's `to_dict()["type"]` and its class.
+MOTIONS = {"static": StaticMotion, "rigid": RigidMotion, "linear_flow": LinearFlowMotion,
+           "periodic_flow": PeriodicFlowMotion, "orbit": OrbitMotion, "pendulum": PendulumMotion,
+           "oscillating_stretch": OscillatingStretchMotion, "bounce": BounceMotion}

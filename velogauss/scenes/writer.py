@@ -1,4 +1,7 @@
-"""Render a named synthetic scene to disk in the D-NeRF layout that `load_scene` reads.
+"""Render a synthetic scene to disk in the D-NeRF layout that `load_scene` reads.
+
+`make_scene` renders a named catalogue scene seen by the camera ring below; `write_scene`
+renders any `AnalyticScene` seen by given cameras (the family's random scenes, family.py).
 
 Written files (in `out_dir`):
 
@@ -11,8 +14,11 @@ Written files (in `out_dir`):
   ground of `multi` is opaque), anti-aliased with `supersample²` rays per pixel.
 - `points3d.ply`: points on the bodies' surfaces at t = 0 with their t = 0 colours.
 - `scene.json`: `name`, `effects`, `incompressible`, `bounds` (box of all bodies over
-  t in [0, 1]), `motion` (per body, `x(t) = A(t) x0 + b(t)` with its parameters), the
-  full `scene` description (`load_ground_truth` rebuilds it) and the `generator` settings.
+  t in [0, 1]), `max_time` (the observed window's end, `future_after`, which the loader
+  takes when none is given), `background` (only where the scene has its own, which the
+  loader takes likewise), `motion` (per body, `x(t) = A(t) x0 + b(t)` with its
+  parameters), the full `scene` description (`load_ground_truth` rebuilds it) and the
+  `generator` settings.
 
 Cameras sit on a ring around the scene's `look_at` point at `camera_distance`, azimuths
 evenly spaced from a seeded random start, elevations cycling through 20°, 35°, 50°
@@ -38,7 +44,8 @@ _MOTION_MODEL = ("x(t) = A(t) x0 + b(t) for the material point at x0 at t = 0; "
                  "v(x, t) = dA/dt A^-1 (x - b) + db/dt; "
                  "rigid: A = exp(t [omega]x), b = c(t) - A centre, c(t) = centre + velocity t + gravity t^2 / 2; "
                  "linear_flow: A = expm(t generator), b = centre - A centre; "
-                 "periodic_flow: A = expm(sin(omega t) generator), b = centre - A centre; static: A = I, b = 0")
+                 "periodic_flow: A = expm(sin(omega t) generator), b = centre - A centre; static: A = I, b = 0; "
+                 "orbit, pendulum, oscillating_stretch, bounce: see velogauss/scenes/trajectories.py")
 
 
 def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, n_heldout=2, supersample=2,
@@ -78,8 +85,33 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
     scene = SCENES[name]()
     rng = np.random.default_rng(seed)
     cameras, ring = _camera_ring(scene.look_at, n_views, camera_distance, camera_angle_x, width, height, rng)
-    heldout = sorted({int(round((j + 0.5) * n_views / n_heldout)) % n_views for j in range(n_heldout)})
-    train_views = [k for k in range(n_views) if k not in heldout]
+    generator = {"resolution": [width, height], "n_views": int(n_views), "n_heldout": int(n_heldout),
+                 "n_times": int(n_times), "seed": None if seed is None else int(seed),
+                 "supersample": int(supersample), "n_points": int(n_points), "layout": layout,
+                 "future_after": float(future_after), "camera_distance": float(camera_distance),
+                 "camera_angle_x": float(camera_angle_x), "azimuths_deg": ring[0], "elevations_deg": ring[1]}
+    return write_scene(scene, cameras, spread_heldout(n_views, n_heldout), out_dir, times, rng, generator,
+                       supersample=supersample, n_points=n_points, layout=layout, future_after=future_after,
+                       camera_angle_x=camera_angle_x)
+
+
+def spread_heldout(n_views, n_heldout):
+    """The `n_heldout` held-out camera indices of `n_views`, evenly spread."""
+    return sorted({int(round((j + 0.5) * n_views / n_heldout)) % n_views for j in range(n_heldout)})
+
+
+def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supersample, n_points, layout,
+                future_after, camera_angle_x, background=None, extra=None):
+    """Render `scene` (an `AnalyticScene`) seen by `cameras` into `out_dir` (module docstring) and return its Path.
+
+    `heldout`: the held-out camera indices; `times (n,)` in [0, 1]; `rng` draws the point cloud;
+    `generator`: the settings recorded in scene.json (the train and held-out views are added);
+    `future_after`: the observed window's end, recorded as `max_time`; `background`: an RGB
+    triple recorded as the scene's own, or None; `extra`: more top-level scene.json entries.
+    The options are checked by the callers.
+    """
+    train_views = [k for k in range(len(cameras)) if k not in heldout]
+    n_times = len(times)
     if layout == "monocular":
         train_pairs = [(train_views[i % len(train_views)], i) for i in range(n_times)]
     else:
@@ -87,18 +119,20 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
     splits = {
         "train": train_pairs,
         "val": [(k, i) for k in heldout for i in range(n_times)],
-        "test": [(k, i) for k in range(n_views) for i in range(n_times) if times[i] > future_after],
+        "test": [(k, i) for k in range(len(cameras)) for i in range(n_times) if times[i] > future_after],
     }
 
     out = Path(out_dir)
     renders = {}
+    for view in range(len(cameras)):  # one camera's frames together: its rays are computed once
+        needed = sorted({i for pairs in splits.values() for v, i in pairs if v == view})
+        images = scene.render_sequence(cameras[view], [float(times[i]) for i in needed], supersample)
+        for i, rgba in zip(needed, images):
+            renders[(view, i)] = np.round(np.clip(rgba, 0.0, 1.0) * 255.0).astype(np.uint8)
     for split, pairs in splits.items():
         (out / split).mkdir(parents=True, exist_ok=True)
         frames = []
         for view, i in pairs:
-            if (view, i) not in renders:
-                rgba = scene.render(cameras[view], float(times[i]), supersample)
-                renders[(view, i)] = np.round(np.clip(rgba, 0.0, 1.0) * 255.0).astype(np.uint8)
             stem = f"r_{view:02d}_{i:03d}"
             iio.imwrite(out / split / f"{stem}.png", renders[(view, i)])
             frames.append({"file_path": f"./{split}/{stem}", "time": float(times[i]), "view": view,
@@ -110,20 +144,18 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
     write_ply(out / "points3d.ply", points, colors, normals)
     metadata = {
         "format": "velogauss-scene/1",
-        "name": name,
+        "name": scene.name,
         "effects": scene.effects,
         "incompressible": scene.incompressible,
         "bounds": scene.bounds().tolist(),
         "time_range": [0.0, 1.0],
+        "max_time": float(future_after),
+        **({} if background is None else {"background": [float(v) for v in background]}),
         "motion": {"model": _MOTION_MODEL,
                    "bodies": [{"name": b.name, **b.motion.to_dict()} for b in scene.bodies]},
         "scene": scene.to_dict(),
-        "generator": {"resolution": [width, height], "n_views": int(n_views), "n_heldout": int(n_heldout),
-                      "n_times": int(n_times), "seed": None if seed is None else int(seed),
-                      "supersample": int(supersample), "n_points": int(n_points), "layout": layout,
-                      "future_after": float(future_after), "camera_distance": float(camera_distance),
-                      "camera_angle_x": float(camera_angle_x), "train_views": train_views, "heldout_views": heldout,
-                      "azimuths_deg": ring[0], "elevations_deg": ring[1]},
+        "generator": {**generator, "train_views": train_views, "heldout_views": heldout},
+        **(extra or {}),
     }
     (out / "scene.json").write_text(json.dumps(metadata, indent=1))
     return out

@@ -102,13 +102,18 @@ def prepare(cfg, data, run_dir, resume=False):
     The schedule's "auto" keys and the transport weight's are resolved here
     (`resolve_schedule`, `resolve_transport`): for a new run from `train.iterations` and the
     motion patterns of the scene's spec, on resume to the run's own values; `trainer.cfg` and config.toml
-    hold the numbers used. Under a "future:F" `cfg.data.split`, `cfg.data.max_time` becomes the
-    scene's `max_time`, the window's end that split derived (spec/data.md, "Splits").
+    hold the numbers used. `cfg.data.max_time` becomes the loaded scene's `max_time`: under a
+    "future:F" `cfg.data.split` the window's end that split derived, under "time" a generated
+    scene's own where the config left the default (spec/data.md, "Splits"); `cfg.data.background`
+    likewise becomes a generated scene's own background.
     """
     _, parallel = apply_threads(cfg.train.threads)
     check_trainable_size(data)
-    if cfg.data.split != "time":  # the window's end comes from the data, and config.toml records it
-        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, max_time=data.max_time))
+    # The window's end and the background may come from the data; config.toml records them.
+    own = {"max_time": data.max_time}
+    if not np.allclose(data.background, cfg.data.background):  # else a float32 copy of the config's
+        own["background"] = tuple(float(v) for v in data.background)
+    cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, **own))
     run_dir = Path(run_dir)
     device = torch.device(cfg.train.device)
     extent = camera_extent([f.camera for f in data.train])
