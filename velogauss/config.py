@@ -62,7 +62,8 @@ Period = Union[Literal["auto"], Every]
 
 
 # data.split's "future:F": F a decimal strictly inside (0, 1) ("0.8", ".8"), so 0, 1 and above never parse.
-FutureSplit = Annotated[str, Field(strict=True, pattern=r"^future:0?\.[0-9]*[1-9][0-9]*$")]
+FUTURE_SPLIT = r"future:(0?\.[0-9]*[1-9][0-9]*)"  # the loader parses F with the same pattern
+FutureSplit = Annotated[str, Field(strict=True, pattern=rf"^{FUTURE_SPLIT}$")]
 
 
 @dataclass(frozen=True, config=_STRICT)

@@ -44,6 +44,7 @@ import imageio.v3 as iio
 import numpy as np
 from skimage.transform import downscale_local_mean
 
+from velogauss.config import FUTURE_SPLIT
 from velogauss.data.cameras import Camera, check_rigid, intrinsics_from_focal, intrinsics_from_fov
 from velogauss.data.errors import DataError
 from velogauss.data.ply import read_ply
@@ -54,8 +55,8 @@ _SPLIT_FILES = {"train": "transforms_train.json", "val": "transforms_val.json", 
 DEFAULT_MAX_TIME = 0.75
 # The colour under transparent pixels when none is given (D-NeRF's white background).
 DEFAULT_BACKGROUND = (1.0, 1.0, 1.0)
-# `split`'s "future:F", F a decimal strictly inside (0, 1), as velogauss.config's data.split allows.
-_FUTURE_SPLIT = re.compile(r"future:(0?\.[0-9]*[1-9][0-9]*)")
+# `split`'s "future:F", F a decimal strictly inside (0, 1): the pattern velogauss.config's data.split allows.
+_FUTURE_SPLIT = re.compile(FUTURE_SPLIT)
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
