@@ -112,7 +112,8 @@ def train_command(
     set_: List[str] = typer.Option([], "--set", "-s", help=_SET_HELP),
     scene: Optional[str] = typer.Option(None, help="Synthetic scene to generate when DATA_DIR is omitted (default: the default scene)."),
     effects: Optional[str] = typer.Option(
-        None, help=f"Comma-separated effects the motion model may use: {','.join(EFFECTS)}."),
+        None, help=f"Comma-separated effects the motion model may use: {','.join(EFFECTS)}; or `declared`, the "
+                   "scene's own (scene.json). Default: all but oscillation, whatever the scene declares."),
     ablation: Optional[Ablation] = typer.Option(None, help="Which of the paper's components to switch off."),
     iterations: Optional[int] = typer.Option(None, help="Training iterations; the schedule's \"auto\" keys (warm-up, "
                                                          "curriculum, physics ramp, densification) scale with them."),

@@ -90,21 +90,24 @@ class _ModelChoices:
     """The first keys of `ModelConfig`, a base of it only so that config.toml lists them
     before the networks' sizes (a dataclass's inherited fields come first, base by base)."""
 
-    effects: Union[Literal["auto"], Annotated[tuple[Effect, ...], Field(min_length=1)]] = "auto"
-    """Effects the motion may use; "auto": the scene's declared ones (scene.json), else all but oscillation."""
-    incompressible: Union[Literal["auto"], Flag] = "auto"
-    """The divergence loss (VG-DIV) on or off; "auto": scene.json's `incompressible`, else on."""
+    effects: Union[Literal["auto", "declared"], Annotated[tuple[Effect, ...], Field(min_length=1)]] = "auto"
+    """Effects the motion may use; "auto": all but oscillation, whatever the scene declares; "declared": the
+    scene's declared ones (scene.json), an optional prior."""
+    incompressible: Union[Literal["auto", "declared"], Flag] = "auto"
+    """The divergence loss (VG-DIV) on or off; "auto": on; "declared": scene.json's `incompressible`."""
     acceleration: Union[Literal["auto"], AccelerationForm] = "poly"
     """The acceleration's time form: "poly" (VG-ACC), "rigid" (VG-ACC-RIGID) or "auto" (rigid for rigid
     effects); "poly", as "rigid" helped one rigid scene and hurt another (benchmarks/FIDELITY.md, section
     6)."""
     patterns: Union[Literal["auto"], PatternForm] = "auto"
     """The motion patterns' time form: "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or
-    "auto": the form the scene's effects call for, which extrapolates best (FIDELITY.md, section 1)."""
+    "auto": the form that best predicts the held-out end of the window from a short probe's Gaussian paths
+    (velogauss.train.backtest); config.toml records the choice."""
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     """How the mixing weights start: "uniform", "clusters" (one k-means region per pattern,
-    velogauss.train.mixing) or "auto": clusters only beside a static body, as they cost a single body
-    (FIDELITY.md, section 0b)."""
+    velogauss.train.mixing) or "auto": clusters when the backtest's probe found still Gaussians beside
+    moving ones, as they cost a single body (FIDELITY.md, section 0b); without a probe, when the effects
+    allow `static`."""
     rigid_centre: Literal["auto", "hull"] = "auto"
     """Rigid patterns' centres: "hull", anchored on the moving Gaussians' hull centroid
     (velogauss.train.centres), or "auto": hull for one body on a parabola, where learned ones drift off it,
@@ -289,7 +292,7 @@ SCHEDULE = {"train.warmup": 200, "train.curriculum": 1200, "physics.ramp": 1200,
             "densify.until": 2000, "densify.every": 100, "densify.opacity_reset_every": 1000,
             "densify.static_every": 500}
 # Intervals: scaled to 0 they would switch their step off, or divide by zero.
-_PERIODS = ("densify.every", "densify.opacity_reset_every", "densify.static_every")
+PERIODS = ("densify.every", "densify.opacity_reset_every", "densify.static_every")
 
 
 # VG-LOSS-PHYS's transport weight where "auto" keeps the transport residual on: its residuals are
@@ -316,10 +319,17 @@ def resolve_transport(cfg, pattern_form, saved=None):
     return dataclasses.replace(cfg, physics=dataclasses.replace(cfg.physics, lambda_transport=weight))
 
 
+# The model keys whose "auto" a new run resolves from its data before training (the backtest,
+# velogauss.train.backtest); config.toml records the values chosen.
+CHOSEN_KEYS = ("patterns", "effects", "mixing_init")
+
+
 def resolve_from_run(cfg, saved):
-    """`cfg` with its "auto" keys (the schedule's and the transport weight) set to the numbers
-    of `saved`, the config of an existing run: what `cfg` means for that run when `--resume`
-    or a sweep continues it."""
+    """`cfg` with its "auto" keys (the schedule's, the transport weight and the backtest's
+    CHOSEN_KEYS) set to the values of `saved`, the config of an existing run: what `cfg` means
+    for that run when `--resume` or a sweep continues it."""
+    chosen = {key: getattr(saved.model, key) for key in CHOSEN_KEYS if getattr(cfg.model, key) == "auto"}
+    cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, **chosen))
     return resolve_transport(resolve_schedule(cfg, saved), None, saved)
 
 
@@ -338,7 +348,7 @@ def resolve_schedule(cfg, saved=None):
             value = getattr(getattr(saved, section), key)
         else:
             value = round(value * cfg.train.iterations / SCHEDULE_ITERATIONS)
-            value = max(1, value) if name in _PERIODS else value
+            value = max(1, value) if name in PERIODS else value
         changes.setdefault(section, {})[key] = value
     return dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section), **values)
                                        for section, values in changes.items()})

@@ -36,7 +36,8 @@ def train_flags(effects=None, ablation=None, iterations=None, max_time=None, hal
     (flags left at None are not given). Raises ValueError naming `--background` when malformed.
     """
     pairs = {
-        "model.effects": ("--effects", None if effects is None else [e.strip() for e in effects.split(",")]),
+        "model.effects": ("--effects", None if effects is None else
+                          effects.strip() if effects.strip() == "declared" else [e.strip() for e in effects.split(",")]),
         "model.ablation": ("--ablation", ablation),
         "train.iterations": ("--iterations", iterations),
         "data.max_time": ("--max-time", max_time),

@@ -214,3 +214,25 @@ TIME_HORIZON = 100.0
 # unchanged, while a far time holds at most this many stages' coefficients in memory
 # (256 x 12 x N floats: 120 MB for 10k Gaussians) instead of all of them.
 STAGE_CHUNK = 256
+# The backtest that chooses the motion patterns' form (velogauss.train.backtest, spec/motion.md,
+# "Choosing the form"). The probe, a deformation-only reconstruction, trains for this share of
+# the run's iterations: its schedule then opens the whole window by a third of its length, as
+# the run's does, and the run costs a third more.
+BACKTEST_PROBE_SHARE = 1.0 / 3.0
+# The candidates are fitted on the paths at t <= this share of the window and scored on the
+# rest: forecasting's usual 70/30 split, which leaves the tail several frames at 16 or more.
+BACKTEST_HEAD = 0.7
+# At most this many Gaussians' paths (a random subset of the moving, opaque ones) and frame
+# times (evenly picked) enter the fits: the mean over points of a body's smooth motion is
+# settled well before 1,000 of them, and 24 times resolve 3 cycles over the window.
+BACKTEST_POINTS = 1000
+BACKTEST_MAX_TIMES = 24
+# Adam steps and starting rate of each candidate's velocity fit (decaying 100x; full batch,
+# one evaluation of the field per step, a few milliseconds): the fidelity study's fit level's
+# rate, and steps enough that the rigid knots, at 50x that rate, cross the scene.
+BACKTEST_STEPS = 300
+BACKTEST_LR = 3e-3
+# The backtest's fits give each of this many clusters of paths (k-means of where each point
+# starts and how it moves) a pattern of its own: enough to part 3 bodies and a ground, each
+# into a few pieces, while every cluster keeps dozens of points to fit.
+BACKTEST_CLUSTERS = 8

@@ -14,6 +14,9 @@ from velogauss.train.centres import anchor_centres, hull_centroid, resolve_rigid
 from velogauss_core.constants import RIGID_HULL_OPACITY
 
 TINY = ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2"]
+# Rigid patterns on the toss's declared effects (translation, rotation, gravity: one body, a
+# parabola): "auto" would read neither the declaration nor pick a form without a backtest.
+RIGID = ["model.effects=declared", "model.patterns=rigid"]
 
 
 def _toss(tmp_path):
@@ -22,7 +25,7 @@ def _toss(tmp_path):
 
 
 def _model(data, overrides=()):
-    cfg = load_config(None, [*TINY, *overrides])
+    cfg = load_config(None, [*TINY, *RIGID, *overrides])
     return build_model(cfg, scene_spec(cfg, data.metadata), data.points, data.point_colors,
                        np.random.default_rng(0))
 
@@ -83,21 +86,26 @@ def test_anchoring_refuses_moving_patterns_and_other_forms(tmp_path):
 
 
 def test_auto_anchors_rigid_patterns_of_one_body():
-    def spec(*effects):
-        return resolve_motion_spec(ModelConfig(effects=effects, incompressible=True, patterns="auto"), None, 1.0)
+    def spec(*effects, patterns="rigid"):
+        return resolve_motion_spec(ModelConfig(effects=effects, incompressible=True, patterns=patterns), None, 1.0)
 
     toss = spec("translation", "rotation", "gravity")
     spin = spec("translation", "rotation")
     multi = spec("translation", "rotation", "gravity", "static")
-    stretch = spec("stretch")
+    stretch = spec("stretch", patterns="auto")
     assert resolve_rigid_centre("auto", toss, "auto") == "hull"
     assert resolve_rigid_centre("auto", spin, "auto") == "learned"  # a centre on a line (2 knots)
     assert resolve_rigid_centre("hull", spin, "auto") == "hull"
     assert resolve_rigid_centre("auto", multi, "auto") == "learned"  # regions start apart: not one body
     assert resolve_rigid_centre("auto", multi, "uniform") == "hull"
     assert resolve_rigid_centre("auto", stretch, "auto") == "learned"
+    # Patterns left "auto" at resolution (no backtest) are the time network: nothing to anchor.
+    unchosen = spec("translation", "rotation", "gravity", patterns="auto")
+    assert resolve_rigid_centre("auto", unchosen, "uniform") == "learned"
     with pytest.raises(ValueError, match="model.rigid_centre"):
         resolve_rigid_centre("hull", stretch, "auto")
+    with pytest.raises(ValueError, match="model.rigid_centre"):
+        resolve_rigid_centre("hull", unchosen, "auto")
     with pytest.raises(ValueError, match="rigid_centre"):
         load_config(None, ["model.rigid_centre=middle"])
 
@@ -108,7 +116,7 @@ def test_training_anchors_the_centre_when_the_motion_starts_and_holds_it(tmp_pat
     data = _toss(tmp_path)
     # "auto" learns the centres of patterns that start apart (not one body).
     choice = ["model.rigid_centre=hull"] if centre == "hull" else ["model.mixing_init=clusters"]
-    cfg = load_config(None, [*TINY, "train.iterations=6", "train.warmup=2", "train.curriculum=1",
+    cfg = load_config(None, [*TINY, *RIGID, "train.iterations=6", "train.warmup=2", "train.curriculum=1",
                              "physics.n_points=16", *choice])
     trainer, _ = loop.prepare(cfg, data, tmp_path / "run")
     B = trainer.model.motion.time
@@ -132,7 +140,7 @@ def test_training_anchors_the_centre_when_the_motion_starts_and_holds_it(tmp_pat
 @pytest.mark.spec("VG-COEF-RIGID")
 def test_a_resumed_run_keeps_its_anchored_centre(tmp_path):
     data = _toss(tmp_path)
-    tiny = [*TINY, "train.warmup=2", "train.curriculum=1", "physics.n_points=16", "train.eval_every=0",
+    tiny = [*TINY, *RIGID, "train.warmup=2", "train.curriculum=1", "physics.n_points=16", "train.eval_every=0",
             "train.checkpoint_every=4", "model.rigid_centre=hull"]
     first = loop.train(load_config(None, [*tiny, "train.iterations=4"]), data, tmp_path / "run", progress=False)
     anchored = first.motion.time.detach()[:, 3:6].clone()

@@ -13,12 +13,14 @@ from velogauss.train import loop
 
 @pytest.fixture(scope="module")
 def trained_toss(tmp_path_factory):
-    """(run folder, scene folder) of a toss trained for 4 iterations."""
+    """(run folder, scene folder) of a toss trained for 4 iterations, with its declared effects
+    and rigid patterns (what "auto" resolved to when it read scene.json; the centre command reads
+    rigid patterns' knots)."""
     root = tmp_path_factory.mktemp("diagnose")
     make_scene("toss", root / "toss", resolution=16, n_views=2, n_times=3, n_points=50, n_heldout=1)
     cfg = load_config(None, ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2",
                              "train.iterations=4", "train.warmup=2", "train.curriculum=1", "physics.n_points=16",
-                             "train.eval_every=0"])
+                             "train.eval_every=0", "model.effects=declared", "model.patterns=rigid"])
     loop.train(cfg, load_scene(root / "toss"), root / "run", progress=False)
     return root / "run", root / "toss"
 

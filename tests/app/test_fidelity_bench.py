@@ -64,13 +64,18 @@ def test_acceleration_scores_against_a_thrown_box(tmp_path):
     assert acceleration_scores(model, thrown, 0.75) == pytest.approx({"acc_observed": 1.0, "acc_future": 1.0})
 
 
+# The toss's declared effects (translation, rotation, gravity) and the rigid patterns they called
+# for when "auto" read scene.json: the centre diagnostics read rigid patterns.
+RIGID = ["model.effects=declared", "model.patterns=rigid"]
+
+
 def _small_toss_model(tmp_path, overrides=()):
     """(model, scene) of a small generated toss, the model freshly built with `overrides`."""
     if not (tmp_path / "toss").is_dir():
         make_scene("toss", tmp_path / "toss", resolution=16, n_views=2, n_times=3, n_points=50, n_heldout=1)
     data = load_scene(tmp_path / "toss")
     cfg = load_config(None, ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2",
-                             *overrides])
+                             *RIGID, *overrides])
     model = build_model(cfg, scene_spec(cfg, data.metadata), data.points, data.point_colors,
                         np.random.default_rng(0))
     return model, load_ground_truth(tmp_path / "toss")
@@ -190,7 +195,7 @@ def test_the_centre_report_reads_a_trained_run(tmp_path):
     make_scene("toss", tmp_path / "toss", resolution=16, n_views=2, n_times=3, n_points=50, n_heldout=1)
     cfg = load_config(None, ["model.hidden=8", "model.depth=1", "model.n_patterns=3", "model.code_dim=2",
                              "train.iterations=4", "train.warmup=2", "train.curriculum=1", "physics.n_points=16",
-                             "train.eval_every=0"])
+                             "train.eval_every=0", *RIGID])
     loop.train(cfg, load_scene(tmp_path / "toss"), tmp_path / "run", progress=False)
     lines = list(report(tmp_path / "run", tmp_path / "toss", [0.0, 1.0]))
     assert [line.split("] ")[1].split(":")[0].split("  ")[0] for line in lines] == [

@@ -65,21 +65,34 @@ def test_candidates_span_the_scan_in_cycles_over_the_window():
 
 
 def _model(effects, patterns="auto"):
-    cfg = load_config(None, [f"model.patterns={patterns}", f"data.max_time={WINDOW}"])
+    """A model of a scene that declares `effects`, taken as declared ("auto" would ignore them)."""
+    cfg = load_config(None, ["model.effects=declared", f"model.patterns={patterns}", f"data.max_time={WINDOW}"])
     spec = scene_spec(cfg, {"effects": list(effects), "incompressible": True})
     return build_model(cfg, spec, np.random.default_rng(0).standard_normal((20, 3)), None,
                        np.random.default_rng(0))
 
 
 def test_a_harmonic_model_starts_at_the_video_frequency():
-    model = _model(("stretch", "oscillation"))
+    model = _model(("stretch", "oscillation"), "harmonic")
+    assert model.spec.pattern_form == "harmonic"
     omega = 2 * np.pi * 1.3 / WINDOW
     assert start_frequency(model, _video(omega), WINDOW) == pytest.approx(omega, abs=0.3)
     assert float(model.motion.time[1].detach()[0]) == pytest.approx(omega, abs=0.3)
     # Without an estimate it keeps HARMONIC_CYCLES_INIT (one cycle over the window).
-    fresh = _model(("stretch", "oscillation"))
+    fresh = _model(("stretch", "oscillation"), "harmonic")
     assert start_frequency(fresh, _video(omega, times=TIMES[:3]), WINDOW) is None
     assert float(fresh.motion.time[1].detach()[0]) == pytest.approx(2 * np.pi / WINDOW)
+
+
+def test_without_a_video_estimate_the_backtest_s_frequency_starts_it():
+    # A monocular video gives no estimate; the probe's paths' frequency (the fallback) is used,
+    # and a video estimate, when there is one, wins over it.
+    omega = 2 * np.pi * 1.3 / WINDOW
+    monocular = _model(("stretch", "oscillation"), "harmonic")
+    assert start_frequency(monocular, _video(omega, times=TIMES[:3]), WINDOW, fallback=7.5) == 7.5
+    assert float(monocular.motion.time[1].detach()[0]) == pytest.approx(7.5)
+    seen = _model(("stretch", "oscillation"), "harmonic")
+    assert start_frequency(seen, _video(omega), WINDOW, fallback=7.5) == pytest.approx(omega, abs=0.3)
 
 
 def test_other_patterns_are_left_alone():

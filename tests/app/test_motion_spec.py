@@ -8,7 +8,7 @@ import pytest
 from velogauss.config import ModelConfig, load_config
 from velogauss.model import build_model, model_from_state, scene_spec
 from velogauss.model.spec import resolve_motion_spec
-from velogauss_core.motion import MotionSpec, spec_from_dict
+from velogauss_core.motion import EFFECTS, UNDECLARED_EFFECTS, MotionSpec, spec_from_dict
 from velogauss.scenes import SCENES
 from velogauss.scenes.trajectories import LinearFlowMotion, PeriodicFlowMotion, RigidMotion, StaticMotion
 
@@ -21,7 +21,7 @@ def _cols(*groups):
 
 def resolve(effects, incompressible, metadata=None, **keys):
     """The `MotionSpec` of the default `[model]` section with these keys, for a scene with `metadata`."""
-    effects = effects if effects == "auto" else tuple(effects)
+    effects = effects if effects in ("auto", "declared") else tuple(effects)
     return resolve_motion_spec(ModelConfig(effects=effects, incompressible=incompressible, **keys), metadata, 1.0)
 
 
@@ -57,27 +57,39 @@ def test_rigid_acceleration_refuses_a_deforming_scene(effects):
         resolve(effects, True, acceleration="rigid")
 
 
-@pytest.mark.parametrize("effects, auto", [
-    (("translation", "rotation", "gravity"), "rigid"), (("translation",), "rigid"), (("rotation", "static"), "rigid"),
-    (("stretch",), "mlp"), (("translation", "shear"), "mlp"), (("static",), "mlp"),
+@pytest.mark.parametrize("effects, rigid", [
+    (("translation", "rotation", "gravity"), True), (("translation",), True), (("rotation", "static"), True),
+    (("stretch",), False), (("translation", "shear"), False), (("static",), False),
 ])
-def test_pattern_form_auto_is_rigid_exactly_for_rigid_motion(effects, auto):
-    assert resolve(effects, True, patterns="auto").pattern_form == auto
-    assert resolve(effects, True).pattern_form == auto  # the default, the config's
+def test_pattern_form_auto_is_the_time_network_and_rigid_is_asked_for(effects, rigid):
+    # "auto" is chosen from the data by the backtest before a run (velogauss.train.backtest);
+    # one that reaches the spec unchosen is the time network, whatever the effects, rigid or not.
+    assert resolve(effects, True, patterns="auto").pattern_form == "mlp"
+    assert resolve(effects, True).pattern_form == "mlp"  # the default, the config's
+    # ... and whatever the scene declares: "declared" effects do not bring back a form either.
+    assert resolve("declared", True, {"effects": list(effects)}).pattern_form == "mlp"
     assert resolve(effects, True, patterns="mlp").pattern_form == "mlp"
-    # The centre accelerates (a third knot) only under gravity.
+    if rigid:  # rigid motion takes the rigid form when asked for
+        p = resolve(effects, True, patterns="rigid")
+        assert p.pattern_form == "rigid" and p.moving
+        # The centre accelerates (a third knot) only under gravity.
+        assert p.rigid_knots == (3 if "gravity" in effects else 2)
     assert resolve(effects, True, patterns="auto").rigid_knots == (3 if "gravity" in effects else 2)
 
 
 @pytest.mark.parametrize("effects", [("stretch", "oscillation"), ("rotation", "oscillation")])
 def test_oscillation_brings_harmonic_patterns_and_their_acceleration(effects):
-    # "auto": a declared oscillation takes VG-COEF-HARM before the rigid form, and its
-    # acceleration is VG-ACC-HARM whatever model.acceleration says (it needs the frequencies).
+    # Harmonic patterns (VG-COEF-HARM) take VG-ACC-HARM as their acceleration whatever
+    # model.acceleration says (it needs the frequencies).
     for acceleration in ("poly", "auto"):
-        p = resolve(effects, True, acceleration=acceleration, patterns="auto")
+        p = resolve(effects, True, acceleration=acceleration, patterns="harmonic")
         assert (p.pattern_form, p.acc_form, p.acceleration) == ("harmonic", "harmonic", True)
+        # A declared oscillation no longer picks them by itself: "auto" is the time network.
+        q = resolve(effects, True, acceleration=acceleration, patterns="auto")
+        assert q.pattern_form == "mlp" and q.acc_form != "harmonic"
     assert resolve(effects, True, patterns="mlp").pattern_form == "mlp"
     # Oscillation alone moves nothing: it is a statement about time, not a basis column.
+    assert not resolve(("oscillation",), True, patterns="harmonic").moving
     assert not resolve(("oscillation",), True, patterns="auto").moving
 
 
@@ -130,13 +142,27 @@ def test_divergence_only_for_incompressible_motion():
     assert resolve(("stretch",), True).divergence
 
 
-def test_auto_reads_the_scene_then_falls_back_to_everything():
-    p = resolve("auto", "auto", {"effects": ["rotation"], "incompressible": False})
-    assert p.effects == ("rotation",) and not p.divergence
-    q = resolve("auto", "auto", None)
-    assert all(q.mask) and q.divergence and q.acceleration
-    # ... every effect but oscillation, an assumption about time only a declaration makes.
-    assert "oscillation" not in q.effects and "static" in q.effects
+def test_auto_ignores_the_scene_and_declared_reads_it():
+    scene = {"effects": ["rotation"], "incompressible": False}
+    # "auto" reads nothing the scene declares: every effect but oscillation, incompressible.
+    for metadata in (scene, None):
+        p = resolve("auto", "auto", metadata)
+        assert p.effects == tuple(e for e in EFFECTS if e in UNDECLARED_EFFECTS)
+        assert all(p.mask) and p.divergence and p.acceleration
+        # ... every effect but oscillation, an assumption about time only a declaration makes.
+        assert "oscillation" not in p.effects and "static" in p.effects
+    # "declared" takes scene.json's declaration, the optional prior ...
+    q = resolve("declared", "declared", scene)
+    assert q.effects == ("rotation",) and not q.divergence
+    assert q.mask == _cols(T, R)
+    # ... each key on its own ...
+    assert resolve("declared", "auto", scene).divergence
+    assert resolve("auto", "declared", scene).effects == p.effects
+    assert not resolve(("rotation",), "declared", scene).divergence
+    # ... and falls back to everything when the scene declares nothing.
+    r = resolve("declared", "declared", None)
+    assert r.effects == p.effects and r.divergence and all(r.mask)
+    assert resolve("declared", "declared", {}).effects == p.effects
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

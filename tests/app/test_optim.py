@@ -19,7 +19,8 @@ EXTENT = 2.5
 
 
 def _model(effects=("translation", "gravity"), **model):
-    cfg = Config(model=ModelConfig(**SMALL, **model))
+    """A model of a scene that declares `effects`, taken as declared ("auto" would ignore them)."""
+    cfg = Config(model=ModelConfig(effects="declared", **SMALL, **model))
     points = np.random.default_rng(0).uniform(-1, 1, (20, 3))
     spec = scene_spec(cfg, {"effects": list(effects), "incompressible": False})
     return build_model(cfg, spec, points, None, np.random.default_rng(0))
@@ -49,7 +50,7 @@ def test_rigid_patterns_share_the_acceleration_rate(effects):
 def test_harmonic_coefficients_take_the_acceleration_rate_and_the_frequency_the_networks():
     # VG-COEF-HARM: C holds velocity coefficients themselves; the shared frequency, started
     # where the video oscillates, is only refined, at the networks' rate.
-    model = _model(("stretch", "oscillation"), patterns="auto")
+    model = _model(("stretch", "oscillation"), patterns="harmonic")
     groups = {g["name"]: g["params"] for g in make_optimizer(model, TRAIN, EXTENT).param_groups}
     C, omega = model.motion.time
     assert groups["acc"] == [model.motion.acc, C]

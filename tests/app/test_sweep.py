@@ -2,6 +2,7 @@
 local Ray (two tiny points plus two failing ones; a sweep killed with SIGKILL and resumed)."""
 
 import csv
+import dataclasses
 import importlib.util
 import os
 import signal
@@ -42,6 +43,10 @@ threads = 1
 "model.depth" = 1
 "model.n_patterns" = 4
 "model.code_dim" = 4
+# The scenes' declared effects and rigid patterns (toss and spin are rigid), what "auto" resolved to
+# when it read scene.json: not about the motion form, and "auto" would first train a backtest probe.
+"model.effects" = "declared"
+"model.patterns" = "rigid"
 [scene_options]
 resolution = 24
 n_views = 4
@@ -139,6 +144,24 @@ def test_resume_plan_skips_done_points_and_never_overwrites_another_config(tmp_p
     plan = plan_point(second, None, tmp_path)
     assert plan.action == "fail" and "different config" in plan.error
     assert load_config(tmp_path / second.name / "config.toml") == cfg
+
+
+def test_a_finished_point_with_the_default_form_is_skipped(tmp_path):
+    """A point left at the default "auto" motion form: its run's config.toml holds what the
+    backtest chose (velogauss.train.backtest: patterns, mixing start, maybe effects without
+    gravity); planning the same grid again must see the same config and skip it."""
+    sweep = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']"))
+    (point,) = sweep.points
+    cfg = point_config(point, None, tmp_path / "data" / "toss")
+    assert cfg.model.patterns == "auto"
+    chosen = dataclasses.replace(cfg, model=dataclasses.replace(
+        cfg.model, patterns="rigid", mixing_init="uniform", effects=("translation", "rotation", "static")))
+    run = tmp_path / point.name
+    run.mkdir()
+    (run / "config.toml").write_text(to_toml(chosen))
+    (run / "metrics.json").write_text("{}")
+    plan = plan_point(point, None, tmp_path)
+    assert (plan.action, plan.error) == ("skip", "")
 
 
 def test_report_mean_and_spread_over_seeds(tmp_path):

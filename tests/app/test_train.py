@@ -34,7 +34,12 @@ from velogauss_fast.motion.velocity import velocity as affine_velocity
 TINY = ["train.iterations=12", "train.warmup=3", "train.curriculum=4", "train.eval_every=6",
         "train.checkpoint_every=4", "densify.start=2", "densify.every=4", "densify.until=10",
         "densify.opacity_reset_every=8", "densify.static_every=4", "physics.n_points=64", "physics.ramp=2",
-        "model.hidden=16", "model.depth=1", "model.n_patterns=4", "model.code_dim=4"]
+        "model.hidden=16", "model.depth=1", "model.n_patterns=4", "model.code_dim=4",
+        # The toss's declared effects (translation, rotation, gravity) and rigid patterns, what
+        # "auto" resolved to before it stopped reading scene.json: these tests are not about the
+        # motion form, and an "auto" form would first train a backtest probe (velogauss.train.backtest;
+        # tests/app/test_end_to_end.py trains the real default).
+        "model.effects=declared", "model.patterns=rigid"]
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +108,7 @@ def test_a_schedule_too_short_for_its_curriculum_warns_naming_the_keys():
 
 
 # Tests that set the time network's last layer by hand (VG-COEF), on a scene whose rigid
-# effects would otherwise give it rigid patterns (VG-COEF-RIGID).
+# effects TINY gives rigid patterns (VG-COEF-RIGID).
 MLP_PATTERNS = ["model.patterns=mlp"]
 
 
@@ -238,6 +243,18 @@ def test_auto_schedule_is_recorded_and_kept_on_resume(tiny_scene, tmp_path):
     assert dataclasses.replace(resumed, train=dataclasses.replace(resumed.train, iterations=6)) == first
 
 
+def test_a_run_of_the_default_form_resumes_with_the_form_it_chose(tiny_scene, tmp_path):
+    """model.patterns "auto": the backtest's choice is recorded like the schedule's numbers, and a
+    resume with the same config keeps it."""
+    default = [item for item in TINY if item.split("=")[0] not in ("model.effects", "model.patterns")]
+    loop.train(load_config(None, default + ["train.iterations=4"]), tiny_scene, tmp_path, progress=False)
+    first = load_config(tmp_path / "config.toml")
+    assert first.model.patterns != "auto" and (tmp_path / "motion_form.json").is_file()
+    loop.train(load_config(None, default + ["train.iterations=6"]), tiny_scene, tmp_path, resume=True, progress=False)
+    resumed = load_config(tmp_path / "config.toml")
+    assert resumed.train.iterations == 6 and resumed.model == first.model
+
+
 def test_checkpoint_write_is_atomic(tiny_scene, tmp_path, monkeypatch):
     cfg = load_config(None, TINY + ["train.iterations=4"])
     loop.train(cfg, tiny_scene, tmp_path, progress=False)
@@ -317,7 +334,7 @@ def test_ctrl_c_checkpoints_and_resume_continues_exactly(tiny_scene, tmp_path, m
     # Training time adds up over both sessions without counting any stretch twice.
     assert 0 < log[0]["elapsed_s"] < log[1]["elapsed_s"] < wall
     model, saved_cfg = load_model(tmp_path / "cut")
-    # The checkpoint holds the config with its "auto" keys resolved (rigid patterns on toss).
+    # The checkpoint holds the config with its "auto" keys resolved (TINY's rigid patterns on toss).
     assert saved_cfg == resolve_transport(resolve_schedule(cfg), "rigid")
     assert load_checkpoint(tmp_path / "cut")["iteration"] == 12
 

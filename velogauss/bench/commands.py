@@ -14,7 +14,8 @@ from velogauss.errors import user_errors
 
 bench_app = typer.Typer(
     help="Time the fast path and write the results into benchmarks/RESULTS.md (each benchmark replaces "
-         "its own section); `fidelity` runs the motion fidelity study of benchmarks/FIDELITY.md.",
+         "its own section); `fidelity` runs the motion fidelity study of benchmarks/FIDELITY.md, `family` the "
+         "study of the random scene family.",
     no_args_is_help=True,
 )
 
@@ -225,3 +226,38 @@ def fidelity_command(
             raise ValueError(f"ACTION: expected one of {', '.join(FIDELITY_ACTIONS)}, got {action!r}")
         fidelity.study(action, scenes=scenes, seeds=seeds, levels=levels, variants=variants, overrides=set_,
                        cache=str(cache), threads=threads, plot=str(plot))
+
+
+family_app = typer.Typer(
+    help="The scene family's study (velogauss.bench.family): `scenes` renders seeds' scenes and their sweep "
+         "grid, `table` the per-scene scores, their spread by kind of motion and the targets.",
+    no_args_is_help=True,
+)
+bench_app.add_typer(family_app, name="family")
+_FAMILY_OUT = typer.Option(Path("runs/family"), "--out", "-o", help="The study's folder: data/, grid.toml, runs.")
+
+
+@family_app.command("scenes")
+def family_scenes_command(
+    seeds: str = typer.Option(..., help="tuning, report (velogauss.scenes.family's lists) or comma-separated seeds."),
+    out: Path = _FAMILY_OUT,
+    ablations: str = typer.Option("full,deform-only", help="Comma-separated ablations trained on every scene."),
+    set_: List[str] = typer.Option([], "--set", help="Config override KEY=VALUE of every run; repeatable."),
+):
+    """Render each seed's scene into OUT/data/random-SEED (unless there), write OUT/grid.toml for `velogauss sweep`."""
+    from velogauss.bench import family
+
+    with user_errors():
+        family.scenes(seeds, out, _names(ablations, "--ablations"), set_, echo=typer.echo)
+
+
+@family_app.command("table")
+def family_table_command(
+    out: Path = _FAMILY_OUT,
+    write: Optional[Path] = typer.Option(None, "--write", help="Also write the Markdown to this file."),
+):
+    """Per-scene scores of the finished runs, their spread over scenes and kinds of motion, the targets (Markdown)."""
+    from velogauss.bench import family
+
+    with user_errors():
+        typer.echo(family.table(out, write), nl=False)

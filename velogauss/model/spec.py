@@ -31,13 +31,13 @@ static) and whether its motion is incompressible, declared in `scene.json` or by
   rigid body's (VG-ACC-RIGID: constant spin, centre under a constant acceleration), as the
   config's `model.acceleration` says ("auto": rigid when the scene's motion is rigid, i.e.
   translation, rotation and gravity only).
-- motion patterns: a time network (VG-COEF), or for a scene whose motion is rigid, rigid
-  bodies under a constant acceleration (VG-COEF-RIGID), or for a scene that declares
-  oscillation, oscillators of learned frequency (VG-COEF-HARM), as the config's
-  `model.patterns` says ("auto": harmonic when the scene oscillates, else rigid when its
-  motion is rigid, else the time network). Rigid centres accelerate (3 knots) only when the
-  scene declares gravity; otherwise they drift uniformly (2 knots). Harmonic patterns bring
-  their own acceleration (VG-ACC-HARM, at their frequencies), whatever `model.acceleration` says.
+- motion patterns: a time network (VG-COEF), rigid bodies under a constant acceleration
+  (VG-COEF-RIGID) or oscillators of learned frequency (VG-COEF-HARM), as the config's
+  `model.patterns` says. Its "auto" is chosen from the data, before the run, by a backtest
+  (velogauss.train.backtest), which writes the choice into the config; one left "auto" here
+  (no backtest ran) is the time network. Rigid centres accelerate (3 knots) when the effects
+  hold gravity; otherwise they drift uniformly (2 knots). Harmonic patterns bring their own
+  acceleration (VG-ACC-HARM, at their frequencies), whatever `model.acceleration` says.
 - divergence loss (VG-DIV): only for incompressible motion.
 - a scene with no motion effect (`static` alone) builds no velocity at all.
 
@@ -76,9 +76,10 @@ def resolve_motion_spec(model_cfg, metadata: dict | None, max_time: float) -> Mo
     a scene's `metadata` (a parsed scene.json, or None) and the end of the observed window
     `max_time`.
 
-    `model.effects` / `model.incompressible` "auto" take the scene's declaration from
-    `metadata`, else every effect but oscillation (UNDECLARED_EFFECTS) and incompressible
-    motion (what NVFi-style methods assume for real scenes). ValueError when
+    `model.effects` / `model.incompressible` "auto" read nothing the scene declares: every
+    effect but oscillation (UNDECLARED_EFFECTS) and incompressible motion (what NVFi-style
+    methods assume for real scenes); "declared" takes the scene's declaration from `metadata`
+    (scene.json), the optional prior, else the same. ValueError when
     `model.acceleration` or `model.patterns` asks "rigid" of a scene that stretches or shears.
     deform-only evaluates its ADF at every t (a DefGS-style model, as DefGS does); the
     others hold it at max_time beyond the window when `model_cfg.adf_clamp_time`.
@@ -125,9 +126,14 @@ def _scene_motion(model_cfg, metadata):
     incompressible, by name."""
     effects, incompressible = model_cfg.effects, model_cfg.incompressible
     acceleration, patterns = model_cfg.acceleration, model_cfg.patterns
+    # "auto" reads nothing the scene declares: every default follows from the data alone.
     if effects == "auto":
+        effects = UNDECLARED_EFFECTS
+    elif effects == "declared":
         effects = tuple((metadata or {}).get("effects", UNDECLARED_EFFECTS))
     if incompressible == "auto":
+        incompressible = True
+    elif incompressible == "declared":
         incompressible = bool((metadata or {}).get("incompressible", True))
     effects = tuple(e for e in EFFECTS if e in effects)
     groups = {e for e in effects if e in MOTION_EFFECTS}
@@ -141,8 +147,8 @@ def _scene_motion(model_cfg, metadata):
         if value == "rigid" and not rigid:
             raise ValueError(f"model.{key}: 'rigid' cannot follow the effects {sorted(groups - RIGID_EFFECTS)} "
                              f"(a rigid body neither stretches nor shears); use '{other}' or 'auto'")
-    if patterns == "auto":
-        patterns = "harmonic" if oscillates and moving else "rigid" if rigid and moving else "mlp"
+    if patterns == "auto":  # not chosen by a backtest (velogauss.train.backtest): the time network
+        patterns = "mlp"
     form = ("rigid" if rigid else "poly") if acceleration == "auto" else acceleration
     # A moving harmonic pattern always has an acceleration (its reversal).
     form = "harmonic" if patterns == "harmonic" else form if has_acceleration else "poly"

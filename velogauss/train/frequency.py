@@ -33,6 +33,22 @@ def video_frequency(frames, max_time):
     return float(omegas[np.argmax(power)]) if seen else None
 
 
+def series_frequency(times, series, max_time):
+    """(Ω, or None) of time series (S, P) at `times` (S,): the scanned frequency
+    (`candidate_frequencies`) whose fits (1, cos, sin) explain the most of their variance, each
+    series' mean removed; None with fewer than FREQ_SCAN_MIN_FRAMES times. The backtest
+    (velogauss.train.backtest) scans the Gaussians' paths with it."""
+    times = np.asarray(times, dtype=np.float64)
+    if len(times) < FREQ_SCAN_MIN_FRAMES:
+        return None
+    series = np.asarray(series, dtype=np.float64)
+    series = series - series.mean(0)
+    gram = series @ series.T
+    omegas = candidate_frequencies(max_time)
+    power = [np.trace(_projection(times, omega) @ gram) for omega in omegas]
+    return float(omegas[int(np.argmax(power))])
+
+
 def candidate_frequencies(max_time):
     """The scanned frequencies (radians per unit time): FREQ_SCAN_CYCLES cycles over
     [0, max_time] in steps of FREQ_SCAN_STEP cycles."""
@@ -65,15 +81,17 @@ def _projection(times, omega):
     return X @ np.linalg.pinv(X)
 
 
-def start_frequency(model, frames, max_time):
+def start_frequency(model, frames, max_time, fallback=None):
     """Set the shared frequency of a fresh model's harmonic patterns (VG-COEF-HARM) to the
-    video's (`video_frequency`); a model with other patterns, or a video without an estimate
+    video's (`video_frequency`), else to `fallback` (the backtest probe's paths' frequency,
+    velogauss.train.backtest); a model with other patterns, or without either estimate
     (the frequency then stays at HARMONIC_CYCLES_INIT cycles), is left as it is. Returns the
     frequency set, or None."""
     spec = model.spec
     if not (spec.moving and spec.velocity == "affine" and spec.pattern_form == "harmonic"):
         return None
     omega = video_frequency(frames, max_time)
+    omega = fallback if omega is None else omega
     if omega is not None:
         with torch.no_grad():
             model.motion.time[1].fill_(omega)

@@ -42,6 +42,7 @@ from velogauss.model.velogauss_model import moving_state_at, render_gaussians
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
+from velogauss.train.backtest import choose_form, selects_form
 from velogauss.train.centres import anchor_centres, first_knot_mask, resolve_rigid_centre
 from velogauss.train.frequency import start_frequency
 from velogauss.train.mixing import resolve_mixing_init, separate_patterns
@@ -71,7 +72,7 @@ def train(cfg, data, run_dir, resume=False, progress=True):
     the one it was trained with, except `train.iterations`, which may grow). Sets torch's and
     the compositing kernels' CPU threads from `train.threads` (velogauss.threads).
     """
-    trainer, start = prepare(cfg, data, run_dir, resume)
+    trainer, start = prepare(cfg, data, run_dir, resume, progress)
     trainer.run(start, progress)
     return trainer.model.eval()
 
@@ -93,7 +94,7 @@ def warn_short_schedule(train_cfg):
             f"with it.", UserWarning, stacklevel=3)
 
 
-def prepare(cfg, data, run_dir, resume=False):
+def prepare(cfg, data, run_dir, resume=False, progress=False):
     """The training state of `train` before its first iteration: (Trainer, first iteration).
 
     Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `trainer.step(it)`
@@ -134,6 +135,10 @@ def prepare(cfg, data, run_dir, resume=False):
         # The checkpoint and config.toml stay one truth: the changes check_resume_config allows.
         write_text(run_dir / "config.toml", to_toml(cfg))
     else:
+        # model.patterns "auto": a short probe's Gaussian paths choose the form (and the mixing's start).
+        report = None
+        if selects_form(cfg):
+            cfg, report = choose_form(cfg, data, train, progress)
         cfg = resolve_schedule(cfg)
         warn_short_schedule(cfg.train)
         rng = np.random.default_rng(cfg.train.seed)
@@ -144,9 +149,11 @@ def prepare(cfg, data, run_dir, resume=False):
         model = build_model(cfg, spec, points, colors, rng).to(device)
         if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, spec) == "clusters":
             separate_patterns(model.motion, model.gaussians.means, rng)
-        start_frequency(model, data.train, data.max_time)
+        start_frequency(model, data.train, data.max_time, None if report is None else report["frequency"])
         start, state = 0, RunState()
         run_dir.mkdir(parents=True, exist_ok=True)
+        if report is not None:
+            write_text(run_dir / "motion_form.json", json.dumps(report, indent=1))
         write_text(run_dir / "config.toml", to_toml(cfg))
         write_text(run_dir / "log.jsonl", "")
     optimizer = make_optimizer(model, cfg.train, extent)

@@ -49,16 +49,18 @@ def cluster_targets(points, k, rng):
     return labels, centres
 
 
-def separate_patterns(motion, points, rng, steps=MIXING_INIT_STEPS, weight=MIXING_INIT_WEIGHT):
+def separate_patterns(motion, points, rng, steps=MIXING_INIT_STEPS, weight=MIXING_INIT_WEIGHT, labels=None):
     """Fit `motion`'s code network and mixing layer (in place) so that m(E(γ(x))) puts
-    `weight` on the pattern of x's k-means cluster, for the points (N, 3) (a tensor).
+    `weight` on the pattern of x's k-means cluster, for the points (N, 3) (a tensor), or on
+    pattern `labels[i]` (N,) ints in [0, K) when given (the backtest's clusters of paths).
 
     Cross-entropy against the smoothed one-hot targets, full batch, `steps` Adam steps at
     MIXING_INIT_LR. Returns the mean weight on the own cluster's pattern after the fit."""
     spec = motion.spec
     k = spec.n_patterns
     x = points.detach().to(motion.code[0].dtype)
-    labels, _ = cluster_targets(x.cpu().numpy(), k, rng)
+    if labels is None:
+        labels, _ = cluster_targets(x.cpu().numpy(), k, rng)
     labels = torch.as_tensor(labels, dtype=torch.long, device=x.device)
     # The cross-entropy against these targets is smallest exactly at m = targets.
     targets = torch.full((len(x), k), (1.0 - weight) / (k - 1), dtype=x.dtype, device=x.device)
