@@ -76,8 +76,12 @@ def make_scene_command(
         None, "--random", metavar="SEED", help="Instead of NAME, draw scene SEED of the random family "
                                                "(velogauss/scenes/family.py): size, cameras and frames are drawn too."),
     list_scenes: bool = typer.Option(False, "--list", help="List the scenes and their physical effects, then exit."),
+    scene_format: Optional[str] = typer.Option(
+        None, "--format", help="Layout written: dnerf (transforms_{train,val,test}.json) or nerfstudio "
+                               "(transforms.json with per-frame intrinsics and split lists). Default: dnerf."),
 ):
-    """Render a synthetic physics scene to disk in the D-NeRF layout (with ground truth in scene.json)."""
+    """Render a synthetic physics scene to disk in the D-NeRF or nerfstudio layout (with ground truth in
+    scene.json)."""
     from velogauss.scenes import DEFAULT_SCENE, SCENES, make_random_scene, make_scene, scene_listing
 
     if list_scenes:
@@ -88,16 +92,20 @@ def make_scene_command(
             raise ValueError(f"NAME: give one scene name or --random SEED; scenes: {', '.join(SCENES)} (see --list)")
         if random_seed is not None:
             given = [flag for flag, value in (("--resolution", resolution), ("--views", views), ("--times", times),
-                                              ("--seed", seed), ("--monocular", monocular)) if value is not None]
+                                              ("--seed", seed), ("--monocular", monocular),
+                                              ("--format", scene_format)) if value is not None]
             if given or random_seed < 0:
                 raise ValueError(f"--random: expected a seed >= 0 alone (the family draws size, cameras and frames), "
                                  f"got {random_seed}" + (f" with {', '.join(given)}" if given else ""))
             name = f"random-{random_seed}"
             path = make_random_scene(random_seed, out or Path("data") / name)
         else:
+            if scene_format not in (None, "dnerf", "nerfstudio"):
+                raise ValueError(f"--format: expected dnerf or nerfstudio, got {scene_format!r}")
             path = make_scene(name, out or Path("data") / name, resolution=128 if resolution is None else resolution,
                               n_views=8 if views is None else views, n_times=21 if times is None else times,
-                              seed=seed or 0, layout="monocular" if monocular else "multiview")
+                              seed=seed or 0, layout="monocular" if monocular else "multiview",
+                              format="dnerf" if scene_format is None else scene_format)
     typer.echo(f"wrote scene {name!r} to {path}")
 
 
@@ -106,7 +114,8 @@ def make_scene_command(
 @app.command("train")
 def train_command(
     data_dir: Optional[Path] = typer.Argument(
-        None, help="Scene folder (D-NeRF/NVFi layout). Omitted: generate the default synthetic scene into RUN_DIR/data."),
+        None, help="Scene folder (D-NeRF/NVFi or nerfstudio layout, see --format). Omitted: generate the default "
+                   "synthetic scene into RUN_DIR/data."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default: runs/<scene>-<YYYYmmdd-HHMMSS>)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help=_CONFIG_HELP),
     set_: List[str] = typer.Option([], "--set", "-s", help=_SET_HELP),
@@ -125,6 +134,9 @@ def train_command(
                                                               "replacing its config, log and checkpoint."),
     max_time: Optional[float] = typer.Option(None, help="End of the observed window; later frames are the future (default: 0.75)."),
     half_res: Optional[bool] = typer.Option(None, "--half-res/--full-res", help="Halve the image resolution."),
+    data_format: Optional[str] = typer.Option(
+        None, "--format", help="Layout of DATA_DIR: dnerf, nerfstudio or auto, detected from its files (default: the "
+                               "config's data.format, auto)."),
     background: Optional[str] = typer.Option(None, help="white | black | R,G,B in [0, 1]."),
     device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
     threads: Optional[int] = typer.Option(
@@ -142,7 +154,8 @@ def train_command(
 
     with user_errors():
         flags = train_flags(effects=effects, ablation=ablation, iterations=iterations, max_time=max_time,
-                            half_res=half_res, background=background, device=device, threads=threads)
+                            half_res=half_res, background=background, device=device, threads=threads,
+                            data_format=data_format)
         cfg_source = config
         if resume and overwrite:
             raise ValueError("--resume and --overwrite: choose one (continue the run, or replace it)")
@@ -166,9 +179,11 @@ def train_command(
     with user_errors(), no_half_made_run(run_dir, fresh=not resume):
         if data_dir is None:
             data_dir = run_dir / "data"
-            if not (data_dir / "transforms_train.json").is_file():
+            layout = "nerfstudio" if cfg.data.format == "nerfstudio" else "dnerf"
+            marker = "transforms.json" if layout == "nerfstudio" else "transforms_train.json"
+            if not (data_dir / marker).is_file():
                 typer.echo(f"generating synthetic scene {scene_name!r} into {data_dir}")
-                make_scene(scene_name, data_dir)
+                make_scene(scene_name, data_dir, format=layout)
         cfg = with_data_dir(cfg, data_dir)
         data = load_run_scene(cfg, data_dir)
         typer.echo(f"training on {data_dir} ({len(data.train)} train frames) -> {run_dir}")
@@ -245,20 +260,54 @@ def render_command(
 @app.command("export")
 def export_command(
     run_dir: Path = typer.Argument(..., help="Run folder written by `velogauss train`."),
-    time: str = typer.Option(..., "--time", "-t", help="Normalised time (t > max_time is the extrapolated future)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="PLY file (default: RUN_DIR/export/gaussians_t<time>.ply)."),
+    time: Optional[str] = typer.Option(
+        None, "--time", "-t", help="One normalised time: one PLY (t > max_time is the extrapolated future)."),
+    times: Optional[str] = typer.Option(
+        None, "--times", metavar="START:STOP:STEP|t1,t2,...",
+        help="A 4D sequence: one PLY per time plus index.json (each frame's time, file, observed or future) "
+             "for sequence players. START:STOP:STEP includes STOP when it lands on the grid (within 1e-6 of a "
+             "step), e.g. 0:1.5:0.05 gives 31 times 0 ... 1.5; or a comma list of increasing times. Times in "
+             "[0, 100], at most 10000 frames."),
+    out: Optional[Path] = typer.Option(
+        None, "--out", "-o", help="With --time the PLY file (default: RUN_DIR/export/gaussians_t<time>.ply); with "
+                                  "--times the folder (default: RUN_DIR/sequence)."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="With --times: write into an --out folder that holds files other than a previous "
+                                   "sequence (files of the sequence's names are replaced, the others kept)."),
     device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
 ):
-    """Write the Gaussians at one time as a standard 3DGS PLY file that splat viewers open."""
-    from velogauss.export import check_time, export_ply
+    """Write the Gaussians at one time (--time) or at a sequence of times (--times; one of the two) as standard
+    3DGS PLY files that splat viewers open.
+
+    A sequence is rewritten in place only over a previous sequence of this command; any other
+    non-empty --out folder is refused unless --overwrite."""
+    from velogauss.export import check_sequence_folder, check_time, export_ply, export_sequence, parse_times
 
     with user_errors():
-        t = check_time(time, "--time")
-        out = out or run_dir / "export" / f"gaussians_t{t:.3f}.ply"
-        check_writable(out.parent, out.name)
-        model, _ = load_run_model(run_dir, device)
-        count = export_ply(model, t, out)
-    typer.echo(f"wrote {count} Gaussians at t={t:g} to {out}")
+        if (time is None) == (times is None):
+            raise ValueError("--time and --times: give exactly one (--time T for one PLY, --times START:STOP:STEP "
+                             "or t1,t2,... for a sequence)")
+        if times is None:
+            if overwrite:
+                raise ValueError("--overwrite: only with --times (--time replaces its one file)")
+            t = check_time(time, "--time")
+            out = out or run_dir / "export" / f"gaussians_t{t:.3f}.ply"
+            check_writable(out.parent, out.name)
+            model, _ = load_run_model(run_dir, device)
+            count = export_ply(model, t, out)
+        else:
+            values = parse_times(times, "--times")
+            out = out or run_dir / "sequence"
+            check_sequence_folder(out, len(values), overwrite, "--out")
+            model, cfg = load_run_model(run_dir, device)
+            index = export_sequence(model, values, out, cfg.data.max_time, run_dir, overwrite, progress=True)
+    if times is None:
+        typer.echo(f"wrote {count} Gaussians at t={t:g} to {out}")
+        return
+    future = sum(not frame["observed"] for frame in index["frames"])
+    typer.echo(f"wrote {len(values)} PLYs of {index['gaussians']} Gaussians, t={values[0]:g} ... {values[-1]:g} "
+               f"({len(values) - future} observed, {future} future past max_time={index['max_time']:g}), "
+               f"and {out / 'index.json'}")
 
 
 # --- the commands of their own packages -----------------------------------------------

@@ -25,13 +25,13 @@ BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
 RUN_FILES = ("config.toml", "log.jsonl", "checkpoints")
 # What `train --overwrite` removes: the run and what eval, render and export wrote into it;
 # data/ stays, since it may be the very scene being trained on.
-RUN_OUTPUTS = RUN_FILES + ("metrics.json", "metrics.md", "renders", "export")
+RUN_OUTPUTS = RUN_FILES + ("metrics.json", "metrics.md", "renders", "export", "sequence")
 
 
 # --- the config of a run ---------------------------------------------------------------
 
 def train_flags(effects=None, ablation=None, iterations=None, max_time=None, half_res=None, background=None,
-                device=None, threads=None):
+                device=None, threads=None, data_format=None):
     """The config values the `train` flags given stand for: {"section.key": (flag, value)}
     (flags left at None are not given). Raises ValueError naming `--background` when malformed.
     """
@@ -40,6 +40,7 @@ def train_flags(effects=None, ablation=None, iterations=None, max_time=None, hal
                           effects.strip() if effects.strip() == "declared" else [e.strip() for e in effects.split(",")]),
         "model.ablation": ("--ablation", ablation),
         "train.iterations": ("--iterations", iterations),
+        "data.format": ("--format", data_format),
         "data.max_time": ("--max-time", max_time),
         "data.half_res": ("--half-res", half_res),
         "data.background": ("--background", None if background is None else parse_background(background)),
@@ -184,7 +185,7 @@ def load_run_scene(cfg, data_dir):
     from velogauss.data import check_trainable_size, load_scene
 
     scene = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
-                       background=cfg.data.background, split=cfg.data.split)
+                       background=cfg.data.background, split=cfg.data.split, format=cfg.data.format)
     check_trainable_size(scene)
     return scene
 

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 from velogauss.cli import app
 from velogauss.run import default_run_dir, parse_background, train_flags
 from velogauss.scenes import SCENES
+from tests.app.cli_checks import assert_refused
 
 runner = CliRunner()
 COMMANDS = ["make-scene", "train", "eval", "render", "export", "view", "sweep", "walkthrough", "bench", "diagnose"]
@@ -20,16 +21,6 @@ DIAGNOSTICS = ["centre", "visibility"]
 
 def invoke(*args):
     return runner.invoke(app, [str(a) for a in args])
-
-
-def assert_bad_input(result, *names):
-    """Exit code 2, one `error:` line naming every item of `names`, no traceback."""
-    assert result.exit_code == 2, result.output
-    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
-    assert len(errors) == 1, result.output
-    for name in names:
-        assert str(name) in errors[0], (name, errors[0])
-    assert "Traceback" not in result.output
 
 
 def test_top_level_help_lists_every_command():
@@ -67,48 +58,48 @@ def test_make_scene_list_shows_every_scene_and_its_effects():
 
 
 def test_make_scene_unknown_name(tmp_path):
-    assert_bad_input(invoke("make-scene", "volcano", "--out", tmp_path / "s"), "volcano")
+    assert_refused(invoke("make-scene", "volcano", "--out", tmp_path / "s"), "volcano")
 
 
 def test_make_scene_without_name():
-    assert_bad_input(invoke("make-scene"), "NAME")
+    assert_refused(invoke("make-scene"), "NAME")
 
 
 def test_eval_missing_run_dir(tmp_path):
     missing = tmp_path / "no-such-run"
-    assert_bad_input(invoke("eval", missing), missing)
+    assert_refused(invoke("eval", missing), missing)
 
 
 def test_render_run_dir_without_checkpoint(tmp_path):
     (tmp_path / "run").mkdir()
-    assert_bad_input(invoke("render", tmp_path / "run"), Path("checkpoints") / "latest.pt")
+    assert_refused(invoke("render", tmp_path / "run"), Path("checkpoints") / "latest.pt")
 
 
 @pytest.mark.parametrize("time", ["nan", "inf", "soon"])
 def test_export_bad_time(tmp_path, time):
-    assert_bad_input(invoke("export", tmp_path, "--time", time), "--time:", time)
+    assert_refused(invoke("export", tmp_path, "--time", time), "--time:", time)
 
 
 def test_eval_bad_split(tmp_path):
-    assert_bad_input(invoke("eval", tmp_path, "--split", "future"), "--split", "future")
+    assert_refused(invoke("eval", tmp_path, "--split", "future"), "--split", "future")
 
 
 def test_train_bad_background(tmp_path):
-    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--background", "1,0"), "--background", "1,0")
+    assert_refused(invoke("train", "--out", tmp_path / "run", "--background", "1,0"), "--background", "1,0")
 
 
 def test_train_bad_effect(tmp_path):
-    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--effects", "rotation,magic"), "--effects", "magic")
+    assert_refused(invoke("train", "--out", tmp_path / "run", "--effects", "rotation,magic"), "--effects", "magic")
 
 
 def test_train_missing_data_dir(tmp_path):
     missing = tmp_path / "nowhere"
-    assert_bad_input(invoke("train", missing, "--out", tmp_path / "run"), missing)
+    assert_refused(invoke("train", missing, "--out", tmp_path / "run"), missing)
 
 
 def test_train_missing_config_file(tmp_path):
     missing = tmp_path / "cfg.toml"
-    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--config", missing), missing)
+    assert_refused(invoke("train", "--out", tmp_path / "run", "--config", missing), missing)
 
 
 def test_bench_unknown_benchmark():
@@ -118,20 +109,20 @@ def test_bench_unknown_benchmark():
 
 
 def test_bench_bad_list_names_the_option(tmp_path):
-    assert_bad_input(invoke("bench", "load", "--settings", "fast", "--out", tmp_path / "R.md"), "settings", "fast")
-    assert_bad_input(invoke("bench", "raster", "--workloads", ",", "--out", tmp_path / "R.md"), "--workloads")
+    assert_refused(invoke("bench", "load", "--settings", "fast", "--out", tmp_path / "R.md"), "settings", "fast")
+    assert_refused(invoke("bench", "raster", "--workloads", ",", "--out", tmp_path / "R.md"), "--workloads")
     assert not (tmp_path / "R.md").exists()
 
 
 def test_bench_on_a_device_it_does_not_measure(tmp_path):
-    assert_bad_input(invoke("bench", "step_profile", "--device", "cuda", "--out", tmp_path / "R.md"), "--device",
+    assert_refused(invoke("bench", "step_profile", "--device", "cuda", "--out", tmp_path / "R.md"), "--device",
                      "cuda")
 
 
 def test_diagnose_missing_run(tmp_path):
     missing = tmp_path / "no-such-run"
-    assert_bad_input(invoke("diagnose", "centre", missing), missing)
-    assert_bad_input(invoke("diagnose", "centre", missing, "--times", "0,soon"), "--times", "soon")
+    assert_refused(invoke("diagnose", "centre", missing), missing)
+    assert_refused(invoke("diagnose", "centre", missing, "--times", "0,soon"), "--times", "soon")
 
 
 def test_flags_become_typed_config_values():
@@ -141,9 +132,9 @@ def test_flags_become_typed_config_values():
 
 
 def test_bad_flag_values_name_the_flag(tmp_path):
-    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--effects", "translation,magic"), "--effects",
+    assert_refused(invoke("train", "--out", tmp_path / "run", "--effects", "translation,magic"), "--effects",
                      "model.effects", "magic")
-    assert_bad_input(invoke("train", "--out", tmp_path / "run", "--iterations", 0), "--iterations",
+    assert_refused(invoke("train", "--out", tmp_path / "run", "--iterations", 0), "--iterations",
                      "train.iterations")
     assert not (tmp_path / "run").exists()
 

@@ -23,6 +23,7 @@ from velogauss.cli import app
 from velogauss.train import loop
 from velogauss.train.checkpoint import checkpoint_path, header
 from velogauss_core.constants import SSIM_WINDOW, TIME_HORIZON
+from tests.app.cli_checks import assert_refused
 
 # Few iterations, a small model; eval and checkpoint every 2 so logs and checkpoints exist
 # in the middle of a run.
@@ -47,16 +48,6 @@ def snapshot(folder):
     """Every file under `folder` and its bytes."""
     folder = Path(folder)
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
-
-
-def assert_refused(result, *names, code=2):
-    """Exit code `code`, one `error:` line naming each of `names`, no traceback."""
-    assert result.exit_code == code, result.output
-    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
-    assert len(errors) == 1, result.output
-    for name in names:
-        assert str(name) in errors[0], (name, errors[0])
-    assert "Traceback" not in result.output
 
 
 @pytest.fixture(scope="module")

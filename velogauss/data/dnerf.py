@@ -32,6 +32,11 @@ Splits (`split`), with `max_time` the end of the observed window:
   `n_train = round(F · n)` of the `n` (Python's `round`, half to even) are `train`, the rest
   `extrapolation`. `max_time` is derived: the last trained frame's time. `interpolation` = val
   frames with `t ≤ max_time` (possibly none). Val frames after it are not used.
+
+The other layouts' loaders (velogauss.data.nerfstudio) share this module's public helpers:
+`prepare_load` (arguments, scene.json), `read_json_object`, `read_pose`, `read_intrinsics`,
+`number`, `number_array`, `resolve_image`, `split_records` (the splits above),
+`assemble_scene` (images, cameras, bounds -> SceneData), `load_image`, `camera_from_record`.
 """
 
 import json
@@ -50,6 +55,7 @@ from velogauss.data.errors import DataError
 from velogauss.data.ply import read_ply
 from velogauss_core.constants import SSIM_WINDOW
 
+INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h")  # pinhole intrinsics in pixels, and the image size
 _SPLIT_FILES = {"train": "transforms_train.json", "val": "transforms_val.json", "test": "transforms_test.json"}
 # The observed window's end when none is given; under "future:F" a max_time equal to it counts as not given.
 DEFAULT_MAX_TIME = 0.75
@@ -129,12 +135,34 @@ def load_scene(path, max_time=None, half_res=False, background=None, split="time
     `scene.json`. Bad arguments raise `DataError` naming the argument (a ValueError, like every
     bad-input error).
     """
-    fraction = _check_split(split)
-    if max_time is not None or fraction is None:
-        max_time = _check_max_time(DEFAULT_MAX_TIME if max_time is None else max_time)
-    background = _check_background(DEFAULT_BACKGROUND if background is None else background)
-    if not isinstance(half_res, (bool, np.bool_)):
-        raise DataError(None, "half_res", f"expected True or False, got {half_res!r}")
+    root, fraction, max_time, background, metadata = prepare_load(path, max_time, half_res, background, split)
+    records, where = {}, {}
+    for part, name in _SPLIT_FILES.items():
+        file = root / name
+        where[part] = (file, "frames")
+        if not file.is_file():
+            if part == "val":
+                records[part] = []
+                continue
+            raise DataError(file, "file", f"missing; a scene needs {_SPLIT_FILES['train']} and {_SPLIT_FILES['test']}")
+        records[part] = _read_transforms(file)
+    train, interpolation, extrapolation, max_time = split_records(root, records, split, fraction, max_time, where)
+    cloud = read_ply(root / "points3d.ply") if (root / "points3d.ply").is_file() else None
+    return assemble_scene(root, train, interpolation, extrapolation, max_time=max_time, split=split,
+                          half_res=half_res, background=background, metadata=metadata, cloud=cloud)
+
+
+def prepare_load(path, max_time, half_res, background, split):
+    """Check `load_scene`'s arguments (shared by every layout's loader) and read the optional
+    `scene.json`; return `(root, fraction, max_time, background, metadata)`.
+
+    `fraction`: F of a "future:F" split, None for "time". `max_time`: the checked number, with
+    scene.json's own where the caller gave none or DEFAULT_MAX_TIME under "time"; None under
+    "future:F" when none was given. `background`: float32 (3,), scene.json's own where the caller
+    gave none or DEFAULT_BACKGROUND. `metadata`: the parsed scene.json or None. Raises DataError
+    naming the argument, or the missing folder.
+    """
+    fraction, max_time, background = check_arguments(max_time, half_res, background, split)
     root = Path(path)
     if not root.is_dir():
         raise DataError(root, "path", "scene folder does not exist")
@@ -144,35 +172,55 @@ def load_scene(path, max_time=None, half_res=False, background=None, split="time
         max_time = own["max_time"]
     if np.array_equal(background, np.float32(DEFAULT_BACKGROUND)) and "background" in own:
         background = own["background"]
-    records = {}
-    for part, name in _SPLIT_FILES.items():
-        file = root / name
-        if not file.is_file():
-            if part == "val":
-                records[part] = []
-                continue
-            raise DataError(file, "file", f"missing; a scene needs {_SPLIT_FILES['train']} and {_SPLIT_FILES['test']}")
-        records[part] = _read_transforms(file)
+    return root, fraction, max_time, background, metadata
+
+
+def check_arguments(max_time, half_res, background, split):
+    """`(fraction, max_time, background)` of `load_scene`'s arguments, checked before any file is
+    read (as `prepare_load` returns them, without scene.json's values); DataError naming the argument."""
+    fraction = _check_split(split)
+    if max_time is not None or fraction is None:
+        max_time = _check_max_time(DEFAULT_MAX_TIME if max_time is None else max_time)
+    background = _check_background(DEFAULT_BACKGROUND if background is None else background)
+    if not isinstance(half_res, (bool, np.bool_)):
+        raise DataError(None, "half_res", f"expected True or False, got {half_res!r}")
+    return fraction, max_time, background
+
+
+def split_records(root, records, split, fraction, max_time, where):
+    """Split frame records into `(train, interpolation, extrapolation, max_time)` (module docstring,
+    "Splits"), shared by every layout's loader.
+
+    `records`: {"train", "val", "test": [record, ...]}, each record a dict with at least `time`
+    (normalised) and `c2w`. `fraction`, `max_time`: as `prepare_load` returns them. `where`:
+    {"train", "test": (file, field)} named by the empty-split errors.
+    """
     if fraction is not None:
-        train, interpolation, extrapolation, max_time = _split_future(root, records, split, fraction, max_time)
-    else:
-        train, interpolation, extrapolation = _split_time(root, records, max_time)
+        return _split_future(root, records, split, fraction, max_time)
+    return (*_split_time(records, max_time, where), max_time)
 
-    cloud = read_ply(root / "points3d.ply") if (root / "points3d.ply").is_file() else None
 
+def assemble_scene(root, train, interpolation, extrapolation, *, max_time, split, half_res, background, metadata,
+                   cloud):
+    """Decode the images of the split records and build the `SceneData` (shared by every layout's
+    loader). Each record holds `image` (its path), optional `mask` (a mask image's path, multiplied
+    into the alpha), `time`, `c2w` (camera-to-world, OpenGL axes), `intrinsics` (as
+    `read_intrinsics` returns them) and `file` (the JSON file naming it). DataError for an
+    unreadable image or mask, images of different sizes, or intrinsics that disagree with the image.
+    """
     size = None
     loaded = {}
     for part, group in (("train", train), ("interpolation", interpolation), ("extrapolation", extrapolation)):
         frames = []
         for record in group:
-            image = _load_image(record, background)
+            image = load_image(record, background)
             if size is None:
                 size = (image.shape[0], image.shape[1], record)
             elif image.shape[:2] != size[:2]:
                 raise DataError(record["image"], "file_path",
                                 f"image is {image.shape[1]}x{image.shape[0]} but {size[2]['image']} is "
                                 f"{size[1]}x{size[0]}; all images must have the same size")
-            camera = _camera(record, image.shape[1], image.shape[0])
+            camera = camera_from_record(record, image.shape[1], image.shape[0])
             if half_res:
                 image = _halve(image)
                 camera = camera.downsampled(2)
@@ -200,15 +248,15 @@ def load_scene(path, max_time=None, half_res=False, background=None, split="time
     )
 
 
-def _split_time(root, records, max_time):
+def _split_time(records, max_time, where):
     """The "time" split's (train, interpolation, extrapolation) records (module docstring)."""
     train = [r for r in records["train"] if r["time"] <= max_time]
     if not train:
-        raise DataError(root / _SPLIT_FILES["train"], "frames",
+        raise DataError(*where["train"],
                         f"empty train split: no frame with time <= max_time={max_time} ({_span(records['train'])})")
     extrapolation = [r for r in records["test"] if r["time"] > max_time]
     if not extrapolation:
-        raise DataError(root / _SPLIT_FILES["test"], "frames",
+        raise DataError(*where["test"],
                         f"empty extrapolation split: no frame with time > max_time={max_time} "
                         f"({_span(records['test'])}); future frames are needed to evaluate extrapolation")
     interpolation = [r for r in records["val"] if r["time"] <= max_time]
@@ -305,14 +353,7 @@ def _pose_time_key(record):
 
 
 def _read_transforms(file):
-    try:
-        meta = json.loads(file.read_text())
-    except OSError as err:
-        raise DataError(file, "file", f"cannot read ({err.strerror or err})") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise DataError(file, "file", f"not valid JSON ({err})") from None
-    if not isinstance(meta, dict):
-        raise DataError(file, "file", "expected a JSON object at the top level")
+    meta = read_json_object(file)
     if "frames" in meta:
         frames = meta["frames"]
         if not isinstance(frames, list):
@@ -343,35 +384,65 @@ def _read_frame(file, meta, where, frame, shared_pose, default_time):
     pose = frame.get("transform_matrix", shared_pose)
     if pose is None:
         raise DataError(file, f"{where}.transform_matrix", "missing key")
-    c2w = _number_array(file, f"{where}.transform_matrix", pose, (4, 4))
-    try:
-        check_rigid("transform_matrix", c2w)
-    except ValueError as err:
-        raise DataError(file, f"{where}.transform_matrix", str(err).split(": ", 1)[-1]) from None
+    c2w = read_pose(file, f"{where}.transform_matrix", pose)
     if "time" in frame:
-        time = _number(file, f"{where}.time", frame["time"])
+        time = number(file, f"{where}.time", frame["time"])
     elif default_time is not None:
         time = default_time
     else:
         raise DataError(file, f"{where}.time", "missing key")
     if not 0.0 <= time <= 1.0:
         raise DataError(file, f"{where}.time", f"time {time!r} is outside [0, 1]")
+    intrinsics = read_intrinsics(file, meta, frame, where, ("camera_angle_x",) + INTRINSIC_KEYS)
+    if "camera_angle_x" not in intrinsics and "fl_x" not in intrinsics:
+        raise DataError(file, "camera_angle_x", "missing key (need camera_angle_x or fl_x, fl_y, cx, cy)")
+    return {"file": file, "where": where, "time": time, "c2w": c2w, "intrinsics": intrinsics,
+            "image": resolve_image(file, f"{where}.file_path", frame["file_path"])}
+
+
+def read_intrinsics(file, meta, frame, where, keys):
+    """`{key: (value, field)}` for each of `keys` that the `frame` object (field `<where>.<key>`) or
+    else the top-level `meta` object (field `<key>`) of JSON `file` gives: a frame's value wins.
+    DataError naming the field for a value that is not a finite number."""
     intrinsics = {}
-    for key in ("camera_angle_x", "fl_x", "fl_y", "cx", "cy", "w", "h"):
+    for key in keys:
         if key in frame:
             field, value = f"{where}.{key}", frame[key]
         elif key in meta:
             field, value = key, meta[key]
         else:
             continue
-        intrinsics[key] = (_number(file, field, value), field)
-    if "camera_angle_x" not in intrinsics and "fl_x" not in intrinsics:
-        raise DataError(file, "camera_angle_x", "missing key (need camera_angle_x or fl_x, fl_y, cx, cy)")
-    return {"file": file, "where": where, "time": time, "c2w": c2w, "intrinsics": intrinsics,
-            "image": _resolve_image(file, where, frame["file_path"])}
+        intrinsics[key] = (number(file, field, value), field)
+    return intrinsics
 
 
-def _number(file, field, value):
+def read_pose(file, field, value):
+    """A camera-to-world `transform_matrix` (4, 4) float64 from JSON `value`; DataError naming `file`
+    and `field` unless it is a finite, rigid 4x4 matrix (`check_rigid`)."""
+    c2w = number_array(file, field, value, (4, 4))
+    try:
+        check_rigid("transform_matrix", c2w)
+    except ValueError as err:
+        raise DataError(file, field, str(err).split(": ", 1)[-1]) from None
+    return c2w
+
+
+def read_json_object(file):
+    """The JSON object in `file`; DataError naming it (field "file") when unreadable, not JSON, or
+    not an object at the top level."""
+    try:
+        meta = json.loads(file.read_text())
+    except OSError as err:
+        raise DataError(file, "file", f"cannot read ({err.strerror or err})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise DataError(file, "file", f"not valid JSON ({err})") from None
+    if not isinstance(meta, dict):
+        raise DataError(file, "file", "expected a JSON object at the top level")
+    return meta
+
+
+def number(file, field, value):
+    """`value` as a float; DataError naming `file` and `field` unless it is a finite JSON number."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DataError(file, field, f"expected a number, got {value!r}")
     if not math.isfinite(value):
@@ -379,7 +450,9 @@ def _number(file, field, value):
     return float(value)
 
 
-def _number_array(file, field, value, shape):
+def number_array(file, field, value, shape):
+    """`value` as a float64 array of `shape`; DataError naming `file` and `field` for another shape,
+    non-numbers or non-finite entries."""
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
@@ -391,23 +464,45 @@ def _number_array(file, field, value, shape):
     return array
 
 
-def _resolve_image(file, where, file_path):
+def resolve_image(file, field, file_path):
+    """The image file that `file_path` (relative to JSON `file`'s folder, extension optional: `.png`,
+    `.jpg`, `.jpeg` are tried) names; DataError naming `file` and `field` when none exists."""
     base = (file.parent / file_path).resolve()
     candidates = [base] if base.suffix.lower() in _IMAGE_SUFFIXES else []
     candidates += [base.with_name(base.name + suffix) for suffix in _IMAGE_SUFFIXES]
     for candidate in candidates:
         if candidate.is_file():
             return candidate
-    raise DataError(file, f"{where}.file_path",
+    raise DataError(file, field,
                     f"image {file_path!r} not found (tried {', '.join(c.name for c in candidates)} in {base.parent})")
 
 
-def _load_image(record, background):
-    path = record["image"]
+def load_image(record, background):
+    """The record's image (H, W, 3) float32, its alpha (the image's own, times the record's optional
+    `mask`'s first channel) composited over `background`: `rgb·a + background·(1 − a)`. DataError
+    naming the image (field "file_path") or the mask (field "mask_path") when unreadable, of an
+    unsupported kind, non-finite, or (a mask) of another size than the image."""
+    image = _decode(record["image"], "file_path")
+    channels = image.shape[2]
+    rgb = np.repeat(image[..., :1], 3, axis=2) if channels in (1, 2) else image[..., :3]
+    alpha = image[..., -1:] if channels in (2, 4) else None
+    if record.get("mask") is not None:
+        mask = _decode(record["mask"], "mask_path")[..., :1]
+        if mask.shape[:2] != image.shape[:2]:
+            raise DataError(record["mask"], "mask_path", f"mask is {mask.shape[1]}x{mask.shape[0]} but its image "
+                            f"{record['image']} is {image.shape[1]}x{image.shape[0]}")
+        alpha = mask if alpha is None else alpha * mask
+    if alpha is not None:
+        rgb = rgb * alpha + background * (1.0 - alpha)
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+def _decode(path, field):
+    """Image file `path` as float32 (H, W, C), C in 1..4, integer pixels divided by their type's maximum."""
     try:
         raw = iio.imread(path, plugin="pillow")
     except Exception as err:  # imageio raises many plugin-specific types for corrupt files
-        raise DataError(path, "file_path", f"unreadable image ({type(err).__name__}: {err})") from None
+        raise DataError(path, field, f"unreadable image ({type(err).__name__}: {err})") from None
     if raw.dtype.kind == "b":  # 1-bit PNG: pillow reads it as bool
         image = raw.astype(np.float32)
     elif raw.dtype.kind == "u":
@@ -415,22 +510,21 @@ def _load_image(record, background):
     elif raw.dtype.kind == "f":
         image = raw.astype(np.float32)
     else:
-        raise DataError(path, "file_path", f"unsupported pixel type {raw.dtype}")
+        raise DataError(path, field, f"unsupported pixel type {raw.dtype}")
     if image.ndim == 2:
         image = image[..., None]
     if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
-        raise DataError(path, "file_path", f"expected a grey, grey+alpha, RGB or RGBA image, got shape {raw.shape}")
+        raise DataError(path, field, f"expected a grey, grey+alpha, RGB or RGBA image, got shape {raw.shape}")
     if not np.all(np.isfinite(image)):
-        raise DataError(path, "file_path", "image contains non-finite values")
-    channels = image.shape[2]
-    rgb = np.repeat(image[..., :1], 3, axis=2) if channels in (1, 2) else image[..., :3]
-    if channels in (2, 4):
-        alpha = image[..., -1:]
-        rgb = rgb * alpha + background * (1.0 - alpha)
-    return np.ascontiguousarray(rgb, dtype=np.float32)
+        raise DataError(path, field, "image contains non-finite values")
+    return image
 
 
-def _camera(record, width, height):
+def camera_from_record(record, width, height):
+    """The `Camera` of a frame record (`record["intrinsics"]` as `read_intrinsics` returns them:
+    `camera_angle_x`, or `fl_x, fl_y, cx, cy`; optional `w, h` checked against the image's
+    `width`, `height`; `record["c2w"]` camera-to-world OpenGL, converted by
+    `Camera.from_c2w_opengl`). DataError naming the JSON file and field otherwise."""
     file, intr = record["file"], record["intrinsics"]
     for key, actual in (("w", width), ("h", height)):
         if key in intr and intr[key][0] != actual:
@@ -438,7 +532,10 @@ def _camera(record, width, height):
     if "fl_x" in intr:
         missing = [k for k in ("fl_y", "cx", "cy") if k not in intr]
         if missing:
-            raise DataError(file, missing[0], "missing key (fl_x is given, so fl_y, cx, cy are needed)")
+            where = record.get("where")
+            raise DataError(file, missing[0] if where is None else f"{where}.{missing[0]}",
+                            "missing key (fl_x is given, so fl_y, cx, cy are needed); neither the frame nor the "
+                            "top level gives it")
         for key in ("fl_x", "fl_y"):
             if intr[key][0] <= 0:
                 raise DataError(file, intr[key][1], f"focal length must be > 0 pixels, got {intr[key][0]!r}")
@@ -469,7 +566,7 @@ def _read_metadata(file):
     if not isinstance(meta, dict):
         raise DataError(file, "file", "expected a JSON object at the top level")
     if "bounds" in meta:
-        bounds = _number_array(file, "bounds", meta["bounds"], (2, 3))
+        bounds = number_array(file, "bounds", meta["bounds"], (2, 3))
         if np.any(bounds[0] > bounds[1]):
             raise DataError(file, "bounds", f"min {bounds[0].tolist()} exceeds max {bounds[1].tolist()}")
         meta["bounds"] = bounds

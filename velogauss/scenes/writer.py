@@ -1,9 +1,9 @@
-"""Render a synthetic scene to disk in the D-NeRF layout that `load_scene` reads.
+"""Render a synthetic scene to disk in the D-NeRF or nerfstudio layout that `load_scene` reads.
 
 `make_scene` renders a named catalogue scene seen by the camera ring below; `write_scene`
 renders any `AnalyticScene` seen by given cameras (the family's random scenes, family.py).
 
-Written files (in `out_dir`):
+Written files (in `out_dir`), `format="dnerf"` (the default):
 
 - `transforms_train.json`: the train views at every time in [0, 1] (the loader's
   `max_time` cuts the future off); with `layout="monocular"` one train view per time,
@@ -12,6 +12,12 @@ Written files (in `out_dir`):
 - `transforms_test.json`: every view at the times `t > future_after` (the future).
 - `train/`, `val/`, `test/`: RGBA PNGs, transparent where no body is hit (the static
   ground of `multi` is opaque), anti-aliased with `supersample²` rays per pixel.
+- with `format="nerfstudio"` instead of the three files and folders: `transforms.json` with
+  `camera_model` "OPENCV" (no distortion), `ply_file_path`, one frame per rendered (view, time)
+  with its own `fl_x, fl_y, cx, cy, w, h`, `transform_matrix` (camera-to-world, OpenGL axes),
+  `time` and `file_path` `images/r_VV_TTT.png` (RGBA PNGs as above), and the lists
+  `train_filenames`, `val_filenames`, `test_filenames` holding the frames of the D-NeRF files of
+  the same name in the same order, so both layouts load to the same splits.
 - `points3d.ply`: points on the bodies' surfaces at t = 0 with their t = 0 colours.
 - `scene.json`: `name`, `effects`, `incompressible`, `bounds` (box of all bodies over
   t in [0, 1]), `max_time` (the observed window's end, `future_after`, which the loader
@@ -35,6 +41,7 @@ from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.data.ply import write_ply
 from velogauss.scenes.catalog import SCENES
 
+SCENE_FORMATS = ("dnerf", "nerfstudio")
 # Horizontal field of view of the D-NeRF synthetic scenes (radians): at 4 units it spans
 # about ±1.44 units, which frames objects of about one unit with room to move.
 DNERF_CAMERA_ANGLE_X = 0.6911112070083618
@@ -50,7 +57,7 @@ _MOTION_MODEL = ("x(t) = A(t) x0 + b(t) for the material point at x0 at t = 0; "
 
 def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, n_heldout=2, supersample=2,
                n_points=2000, layout="multiview", future_after=0.75, camera_distance=4.0,
-               camera_angle_x=DNERF_CAMERA_ANGLE_X):
+               camera_angle_x=DNERF_CAMERA_ANGLE_X, format="dnerf"):
     """Render scene `name` (a key of `catalog.SCENES`) into `out_dir` and return its Path.
 
     `resolution`: int (square) or `(width, height)` in pixels. `n_views` cameras, of which
@@ -58,7 +65,8 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
     `seed` fixes the camera ring's azimuth offset and elevation jitter and the point-cloud
     samples (the scene itself is deterministic). `supersample`: rays per pixel side.
     `n_points`: size of `points3d.ply`. `layout`: "multiview" or "monocular".
-    `future_after`: times after it form `transforms_test.json`. Existing files are
+    `future_after`: times after it form `transforms_test.json`. `format`: "dnerf" or "nerfstudio",
+    the layout written (module docstring). Existing files are
     overwritten. Defaults (128×128, 8 views, 21 times) render in a few seconds. At 64×64 the
     motion of the slow scenes inside the window is 1–3 px, and their learned velocity error
     was twice that at 128×128 for the same training time (benchmarks/FIDELITY.md).
@@ -73,6 +81,8 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
             raise ValueError(f"{arg}: expected an integer >= {low}, got {value!r}")
     if n_heldout >= n_views:
         raise ValueError(f"n_heldout: must be < n_views={n_views} so that train views remain, got {n_heldout}")
+    if format not in SCENE_FORMATS:
+        raise ValueError(f"format: expected one of {', '.join(SCENE_FORMATS)}, got {format!r}")
     if layout not in ("multiview", "monocular"):
         raise ValueError(f"layout: expected 'multiview' or 'monocular', got {layout!r}")
     times = np.linspace(0.0, 1.0, n_times)
@@ -89,10 +99,11 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
                  "n_times": int(n_times), "seed": None if seed is None else int(seed),
                  "supersample": int(supersample), "n_points": int(n_points), "layout": layout,
                  "future_after": float(future_after), "camera_distance": float(camera_distance),
-                 "camera_angle_x": float(camera_angle_x), "azimuths_deg": ring[0], "elevations_deg": ring[1]}
+                 "camera_angle_x": float(camera_angle_x), "azimuths_deg": ring[0], "elevations_deg": ring[1],
+                 **({} if format == "dnerf" else {"format": format})}
     return write_scene(scene, cameras, spread_heldout(n_views, n_heldout), out_dir, times, rng, generator,
                        supersample=supersample, n_points=n_points, layout=layout, future_after=future_after,
-                       camera_angle_x=camera_angle_x)
+                       camera_angle_x=camera_angle_x, format=format)
 
 
 def spread_heldout(n_views, n_heldout):
@@ -101,14 +112,14 @@ def spread_heldout(n_views, n_heldout):
 
 
 def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supersample, n_points, layout,
-                future_after, camera_angle_x, background=None, extra=None):
+                future_after, camera_angle_x, background=None, extra=None, format="dnerf"):
     """Render `scene` (an `AnalyticScene`) seen by `cameras` into `out_dir` (module docstring) and return its Path.
 
     `heldout`: the held-out camera indices; `times (n,)` in [0, 1]; `rng` draws the point cloud;
     `generator`: the settings recorded in scene.json (the train and held-out views are added);
     `future_after`: the observed window's end, recorded as `max_time`; `background`: an RGB
-    triple recorded as the scene's own, or None; `extra`: more top-level scene.json entries.
-    The options are checked by the callers.
+    triple recorded as the scene's own, or None; `extra`: more top-level scene.json entries;
+    `format`: "dnerf" or "nerfstudio", the layout written. The options are checked by the callers.
     """
     train_views = [k for k in range(len(cameras)) if k not in heldout]
     n_times = len(times)
@@ -129,16 +140,19 @@ def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supe
         images = scene.render_sequence(cameras[view], [float(times[i]) for i in needed], supersample)
         for i, rgba in zip(needed, images):
             renders[(view, i)] = np.round(np.clip(rgba, 0.0, 1.0) * 255.0).astype(np.uint8)
-    for split, pairs in splits.items():
-        (out / split).mkdir(parents=True, exist_ok=True)
-        frames = []
-        for view, i in pairs:
-            stem = f"r_{view:02d}_{i:03d}"
-            iio.imwrite(out / split / f"{stem}.png", renders[(view, i)])
-            frames.append({"file_path": f"./{split}/{stem}", "time": float(times[i]), "view": view,
-                           "transform_matrix": cameras[view].c2w_opengl.tolist()})
-        document = {"camera_angle_x": camera_angle_x, "frames": frames}
-        (out / f"transforms_{split}.json").write_text(json.dumps(document, indent=1))
+    if format == "nerfstudio":
+        _write_nerfstudio(out, cameras, times, splits, renders)
+    else:
+        for split, pairs in splits.items():
+            (out / split).mkdir(parents=True, exist_ok=True)
+            frames = []
+            for view, i in pairs:
+                stem = f"r_{view:02d}_{i:03d}"
+                iio.imwrite(out / split / f"{stem}.png", renders[(view, i)])
+                frames.append({"file_path": f"./{split}/{stem}", "time": float(times[i]), "view": view,
+                               "transform_matrix": cameras[view].c2w_opengl.tolist()})
+            document = {"camera_angle_x": camera_angle_x, "frames": frames}
+            (out / f"transforms_{split}.json").write_text(json.dumps(document, indent=1))
 
     points, colors, normals = scene.sample_surface(n_points, rng)
     write_ply(out / "points3d.ply", points, colors, normals)
@@ -159,6 +173,26 @@ def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supe
     }
     (out / "scene.json").write_text(json.dumps(metadata, indent=1))
     return out
+
+
+def _write_nerfstudio(out, cameras, times, splits, renders):
+    """`transforms.json` and `images/` (module docstring): each rendered (view, time) once, in view
+    then time order, with its own intrinsics; the split lists keep the D-NeRF files' orders."""
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    frames = []
+    for view, i in sorted(renders):
+        camera = cameras[view]
+        name = f"images/r_{view:02d}_{i:03d}.png"
+        iio.imwrite(out / name, renders[(view, i)])
+        frames.append({"file_path": name, "time": float(times[i]), "view": view,
+                       "fl_x": float(camera.K[0, 0]), "fl_y": float(camera.K[1, 1]),
+                       "cx": float(camera.K[0, 2]), "cy": float(camera.K[1, 2]),
+                       "w": int(camera.width), "h": int(camera.height),
+                       "transform_matrix": camera.c2w_opengl.tolist()})
+    document = {"camera_model": "OPENCV", "ply_file_path": "points3d.ply", "frames": frames,
+                **{f"{split}_filenames": [f"images/r_{view:02d}_{i:03d}.png" for view, i in pairs]
+                   for split, pairs in splits.items()}}
+    (out / "transforms.json").write_text(json.dumps(document, indent=1))
 
 
 def _resolution(resolution):

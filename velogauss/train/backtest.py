@@ -26,6 +26,7 @@ which starts the harmonic patterns when the video gives none (a monocular captur
 
 import dataclasses
 import tempfile
+import time
 
 import numpy as np
 import torch
@@ -81,8 +82,11 @@ def choose_form(cfg, data, run, progress=False):
     """(cfg with `model.patterns`, `model.effects` and `model.mixing_init` resolved, report dict)
     for a new run of `cfg` on `data` (velogauss.data.SceneData). `run(cfg, data, run_dir,
     progress=...) -> model` trains the probe (velogauss.train.loop.train). The report: every
-    candidate's tail score, the choice, the probe's moving share and its paths' frequency."""
+    candidate's tail score, the choice, the probe's moving share, its paths' frequency, and the
+    seconds the probe and the backtest took."""
+    clock = time.perf_counter()
     model = probe(cfg, data, run, progress)
+    probe_s = time.perf_counter() - clock
     times, paths = probe_paths(model, data, np.random.default_rng(cfg.train.seed))
     moving_share = float(model.moving.float().mean())
     report = {"probe_iterations": probe_config(cfg).train.iterations, "moving_share": moving_share,
@@ -102,7 +106,8 @@ def choose_form(cfg, data, run, progress=False):
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
     model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects)
     frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
-    report.update({"scores": scores, "choice": choice, "mixing_init": mixing, "frequency": frequency})
+    report.update({"scores": scores, "choice": choice, "mixing_init": mixing, "frequency": frequency,
+                   "probe_s": probe_s, "backtest_s": time.perf_counter() - clock - probe_s})
     return dataclasses.replace(cfg, model=model_cfg), report
 
 
