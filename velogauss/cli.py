@@ -77,8 +77,10 @@ def make_scene_command(
                                                "(velogauss/scenes/family.py): size, cameras and frames are drawn too."),
     list_scenes: bool = typer.Option(False, "--list", help="List the scenes and their physical effects, then exit."),
     scene_format: Optional[str] = typer.Option(
-        None, "--format", help="Layout written: dnerf (transforms_{train,val,test}.json) or nerfstudio "
-                               "(transforms.json with per-frame intrinsics and split lists). Default: dnerf."),
+        None, "--format", help="Layout written: dnerf (transforms_{train,val,test}.json), nerfstudio "
+                               "(transforms.json with per-frame intrinsics and split lists) or panoptic "
+                               "(Dynamic3DGaussians' train_meta.json, test_meta.json, ims/, seg/, "
+                               "init_pt_cld.npz). Default: dnerf."),
 ):
     """Render a synthetic physics scene to disk in the D-NeRF or nerfstudio layout (with ground truth in
     scene.json)."""
@@ -100,8 +102,8 @@ def make_scene_command(
             name = f"random-{random_seed}"
             path = make_random_scene(random_seed, out or Path("data") / name)
         else:
-            if scene_format not in (None, "dnerf", "nerfstudio"):
-                raise ValueError(f"--format: expected dnerf or nerfstudio, got {scene_format!r}")
+            if scene_format not in (None, "dnerf", "nerfstudio", "panoptic"):
+                raise ValueError(f"--format: expected dnerf, nerfstudio or panoptic, got {scene_format!r}")
             path = make_scene(name, out or Path("data") / name, resolution=128 if resolution is None else resolution,
                               n_views=8 if views is None else views, n_times=21 if times is None else times,
                               seed=seed or 0, layout="monocular" if monocular else "multiview",
@@ -114,7 +116,7 @@ def make_scene_command(
 @app.command("train")
 def train_command(
     data_dir: Optional[Path] = typer.Argument(
-        None, help="Scene folder (D-NeRF/NVFi or nerfstudio layout, see --format). Omitted: generate the default "
+        None, help="Scene folder (D-NeRF/NVFi, nerfstudio or Panoptic layout, see --format). Omitted: generate the default "
                    "synthetic scene into RUN_DIR/data."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder (default: runs/<scene>-<YYYYmmdd-HHMMSS>)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help=_CONFIG_HELP),
@@ -135,7 +137,7 @@ def train_command(
     max_time: Optional[float] = typer.Option(None, help="End of the observed window; later frames are the future (default: 0.75)."),
     half_res: Optional[bool] = typer.Option(None, "--half-res/--full-res", help="Halve the image resolution."),
     data_format: Optional[str] = typer.Option(
-        None, "--format", help="Layout of DATA_DIR: dnerf, nerfstudio or auto, detected from its files (default: the "
+        None, "--format", help="Layout of DATA_DIR: dnerf, nerfstudio, panoptic or auto, detected from its files (default: the "
                                "config's data.format, auto)."),
     background: Optional[str] = typer.Option(None, help="white | black | R,G,B in [0, 1]."),
     device: Optional[str] = typer.Option(None, help=_DEVICE_HELP),
@@ -150,6 +152,7 @@ def train_command(
 
     --out must be a new folder (or one without a run) unless --resume continues the run in it
     or --overwrite replaces it."""
+    from velogauss.data import LAYOUTS
     from velogauss.scenes import DEFAULT_SCENE, make_scene
 
     with user_errors():
@@ -179,9 +182,8 @@ def train_command(
     with user_errors(), no_half_made_run(run_dir, fresh=not resume):
         if data_dir is None:
             data_dir = run_dir / "data"
-            layout = "nerfstudio" if cfg.data.format == "nerfstudio" else "dnerf"
-            marker = "transforms.json" if layout == "nerfstudio" else "transforms_train.json"
-            if not (data_dir / marker).is_file():
+            layout = "dnerf" if cfg.data.format == "auto" else cfg.data.format
+            if not (data_dir / LAYOUTS[layout][1][0]).is_file():
                 typer.echo(f"generating synthetic scene {scene_name!r} into {data_dir}")
                 make_scene(scene_name, data_dir, format=layout)
         cfg = with_data_dir(cfg, data_dir)

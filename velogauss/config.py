@@ -72,9 +72,9 @@ class DataConfig:
 
     dir: str = ""
     """The scene folder; recorded by `velogauss train`"""
-    format: Literal["auto", "dnerf", "nerfstudio"] = "auto"
+    format: Literal["auto", "dnerf", "nerfstudio", "panoptic"] = "auto"
     """The scene folder's layout: "dnerf" (transforms_train.json, transforms_test.json), "nerfstudio"
-    (transforms.json) or "auto", detected from the files (spec/data.md)"""
+    (transforms.json), "panoptic" (train_meta.json) or "auto", detected from the files (spec/data.md)"""
     max_time: _float(gt=0.0, lt=1.0) = 0.75
     """End of the observed window; later frames are the future to predict. Under a "future:F" split it is
     derived (the last trained frame's time) and recorded so; a value other than 0.75 that differs is an error."""

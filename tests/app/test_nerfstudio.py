@@ -307,7 +307,7 @@ def test_detection_and_forcing(tmp_path, pair):
     with pytest.raises(DataError, match=r"both: format: .*several layouts"):
         load_scene(both)
     assert len(load_scene(both, format="nerfstudio", max_time=0.5).train) == 2
-    with pytest.raises(DataError, match=r"^format: expected one of auto, dnerf, nerfstudio, got 'colmap'"):
+    with pytest.raises(DataError, match=r"^format: expected one of auto, dnerf, nerfstudio, panoptic, got 'colmap'"):
         load_scene(both, format="colmap")
 
 

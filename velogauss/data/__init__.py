@@ -1,7 +1,7 @@
-"""Datasets: cameras in the spec's conventions, the D-NeRF/NVFi and nerfstudio loaders, point clouds.
+"""Datasets: cameras in the spec's conventions, the D-NeRF/NVFi, nerfstudio and Panoptic loaders, point clouds.
 
 `load_scene(path, max_time=None, half_res=False, background=(1, 1, 1), split="time", format="auto")
--> SceneData` detects the folder's layout (or takes `format`: "dnerf", "nerfstudio"), validates
+-> SceneData` detects the folder's layout (or takes `format`: "dnerf", "nerfstudio", "panoptic"), validates
 the whole scene folder up front and raises one `DataError` (a ValueError naming the file and
 field) for bad data; `check_trainable_size(scene)` refuses images smaller than the SSIM window
 before training or evaluation.
@@ -9,7 +9,7 @@ before training or evaluation.
 
 from pathlib import Path
 
-from velogauss.data import dnerf, nerfstudio
+from velogauss.data import dnerf, nerfstudio, panoptic
 from velogauss.data.cameras import Camera
 from velogauss.data.dnerf import Frame, SceneData, check_trainable_size
 from velogauss.data.errors import DataError
@@ -19,14 +19,16 @@ from velogauss.data.ply import PointCloud, read_ply, write_ply
 LAYOUTS = {
     "dnerf": (dnerf.load_scene, ("transforms_train.json", "transforms_test.json")),
     "nerfstudio": (nerfstudio.load_scene, (nerfstudio.TRANSFORMS_FILE,)),
+    "panoptic": (panoptic.load_scene, (panoptic.TRAIN_META,)),
 }
 FORMATS = ("auto",) + tuple(LAYOUTS)
 
 
 def detect_format(path):
     """The layout of scene folder `path`: "dnerf" when it holds `transforms_train.json`,
-    "nerfstudio" when it holds `transforms.json`. DataError naming the folder when it is missing,
-    holds both (name one with `format`) or neither (the message lists each layout's files)."""
+    "nerfstudio" when it holds `transforms.json`, "panoptic" when it holds `train_meta.json`.
+    DataError naming the folder when it is missing, holds several (name one with `format`) or
+    none (the message lists each layout's files)."""
     root = Path(path)
     if not root.is_dir():
         raise DataError(root, "path", "scene folder does not exist")
@@ -42,7 +44,7 @@ def detect_format(path):
 
 def load_scene(path, max_time=None, half_res=False, background=None, split="time", format="auto"):
     """Load and validate the scene folder `path` into a `SceneData`: `format` "auto" (the default)
-    detects the layout (`detect_format`), "dnerf" or "nerfstudio" forces one; the other arguments
+    detects the layout (`detect_format`), "dnerf", "nerfstudio" or "panoptic" forces one; the other arguments
     are those of `velogauss.data.dnerf.load_scene`. DataError naming `format` for another value."""
     if format not in FORMATS:
         raise DataError(None, "format", f"expected one of {', '.join(FORMATS)}, got {format!r}")
@@ -52,5 +54,5 @@ def load_scene(path, max_time=None, half_res=False, background=None, split="time
     return loader(path, max_time=max_time, half_res=half_res, background=background, split=split)
 
 
-__all__ = ["Camera", "DataError", "FORMATS", "Frame", "PointCloud", "SceneData", "check_trainable_size",
+__all__ = ["Camera", "DataError", "FORMATS", "LAYOUTS", "Frame", "PointCloud", "SceneData", "check_trainable_size",
            "detect_format", "load_scene", "read_ply", "write_ply"]

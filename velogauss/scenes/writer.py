@@ -1,4 +1,4 @@
-"""Render a synthetic scene to disk in the D-NeRF or nerfstudio layout that `load_scene` reads.
+"""Render a synthetic scene to disk in the D-NeRF, nerfstudio or Panoptic layout that `load_scene` reads.
 
 `make_scene` renders a named catalogue scene seen by the camera ring below; `write_scene`
 renders any `AnalyticScene` seen by given cameras (the family's random scenes, family.py).
@@ -18,6 +18,14 @@ Written files (in `out_dir`), `format="dnerf"` (the default):
   `time` and `file_path` `images/r_VV_TTT.png` (RGBA PNGs as above), and the lists
   `train_filenames`, `val_filenames`, `test_filenames` holding the frames of the D-NeRF files of
   the same name in the same order, so both layouts load to the same splits.
+- with `format="panoptic"` instead (Dynamic3DGaussians' layout, velogauss/data/panoptic.py):
+  `train_meta.json` (the train views) and `test_meta.json` (the held-out views), each with `w`, `h`
+  and per time index `t` and view `c` `k[t][c]`, `w2c[t][c]` (OpenCV world-to-camera), `fn[t][c]`
+  = `"<view>/<t:06d>.jpg"` and `cam_id[t][c]` = the view; `ims/<view>/<t:06d>.jpg` the straight
+  (not premultiplied) RGB as JPEG at quality 95 without chroma subsampling; `seg/<view>/<t:06d>.png`
+  the alpha as an 8-bit grey PNG (the loader's mask); `init_pt_cld.npz` (`data` (N, 7): the points
+  below, their colours and seg 1) instead of `points3d.ply`. With `layout="monocular"` each time
+  step lists its one train view. There is no future file: the loader's test role is every frame.
 - `points3d.ply`: points on the bodies' surfaces at t = 0 with their t = 0 colours.
 - `scene.json`: `name`, `effects`, `incompressible`, `bounds` (box of all bodies over
   t in [0, 1]), `max_time` (the observed window's end, `future_after`, which the loader
@@ -41,7 +49,8 @@ from velogauss.data.cameras import Camera, intrinsics_from_fov, look_at
 from velogauss.data.ply import write_ply
 from velogauss.scenes.catalog import SCENES
 
-SCENE_FORMATS = ("dnerf", "nerfstudio")
+SCENE_FORMATS = ("dnerf", "nerfstudio", "panoptic")
+PANOPTIC_JPEG_QUALITY = 95
 # Horizontal field of view of the D-NeRF synthetic scenes (radians): at 4 units it spans
 # about ±1.44 units, which frames objects of about one unit with room to move.
 DNERF_CAMERA_ANGLE_X = 0.6911112070083618
@@ -65,8 +74,8 @@ def make_scene(name, out_dir, resolution=128, n_views=8, n_times=21, seed=0, *, 
     `seed` fixes the camera ring's azimuth offset and elevation jitter and the point-cloud
     samples (the scene itself is deterministic). `supersample`: rays per pixel side.
     `n_points`: size of `points3d.ply`. `layout`: "multiview" or "monocular".
-    `future_after`: times after it form `transforms_test.json`. `format`: "dnerf" or "nerfstudio",
-    the layout written (module docstring). Existing files are
+    `future_after`: times after it form `transforms_test.json`. `format`: "dnerf", "nerfstudio" or
+    "panoptic", the layout written (module docstring). Existing files are
     overwritten. Defaults (128×128, 8 views, 21 times) render in a few seconds. At 64×64 the
     motion of the slow scenes inside the window is 1–3 px, and their learned velocity error
     was twice that at 128×128 for the same training time (benchmarks/FIDELITY.md).
@@ -119,7 +128,7 @@ def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supe
     `generator`: the settings recorded in scene.json (the train and held-out views are added);
     `future_after`: the observed window's end, recorded as `max_time`; `background`: an RGB
     triple recorded as the scene's own, or None; `extra`: more top-level scene.json entries;
-    `format`: "dnerf" or "nerfstudio", the layout written. The options are checked by the callers.
+    `format`: "dnerf", "nerfstudio" or "panoptic", the layout written. The options are checked by the callers.
     """
     train_views = [k for k in range(len(cameras)) if k not in heldout]
     n_times = len(times)
@@ -142,6 +151,8 @@ def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supe
             renders[(view, i)] = np.round(np.clip(rgba, 0.0, 1.0) * 255.0).astype(np.uint8)
     if format == "nerfstudio":
         _write_nerfstudio(out, cameras, times, splits, renders)
+    elif format == "panoptic":
+        _write_panoptic(out, cameras, splits, renders)
     else:
         for split, pairs in splits.items():
             (out / split).mkdir(parents=True, exist_ok=True)
@@ -155,7 +166,11 @@ def write_scene(scene, cameras, heldout, out_dir, times, rng, generator, *, supe
             (out / f"transforms_{split}.json").write_text(json.dumps(document, indent=1))
 
     points, colors, normals = scene.sample_surface(n_points, rng)
-    write_ply(out / "points3d.ply", points, colors, normals)
+    if format == "panoptic":
+        seg = np.ones((len(points), 1))
+        np.savez_compressed(out / "init_pt_cld.npz", data=np.concatenate([points, colors, seg], axis=1))
+    else:
+        write_ply(out / "points3d.ply", points, colors, normals)
     metadata = {
         "format": "velogauss-scene/1",
         "name": scene.name,
@@ -193,6 +208,28 @@ def _write_nerfstudio(out, cameras, times, splits, renders):
                 **{f"{split}_filenames": [f"images/r_{view:02d}_{i:03d}.png" for view, i in pairs]
                    for split, pairs in splits.items()}}
     (out / "transforms.json").write_text(json.dumps(document, indent=1))
+
+
+def _write_panoptic(out, cameras, splits, renders):
+    """`train_meta.json` (the train views), `test_meta.json` (the held-out views), `ims/` and `seg/`
+    (module docstring): per time index, its views in split order."""
+    for name, split in (("train_meta.json", "train"), ("test_meta.json", "val")):
+        steps = sorted({i for _, i in splits[split]})
+        meta = {"w": int(cameras[0].width), "h": int(cameras[0].height), "k": [], "w2c": [], "fn": [], "cam_id": []}
+        for i in steps:
+            views = [view for view, j in splits[split] if j == i]
+            meta["k"].append([cameras[v].K.tolist() for v in views])
+            meta["w2c"].append([cameras[v].viewmat.tolist() for v in views])
+            meta["fn"].append([f"{v}/{i:06d}.jpg" for v in views])
+            meta["cam_id"].append(views)
+            for v in views:
+                for folder in ("ims", "seg"):
+                    (out / folder / str(v)).mkdir(parents=True, exist_ok=True)
+                rgba = renders[(v, i)]
+                iio.imwrite(out / "ims" / str(v) / f"{i:06d}.jpg", rgba[..., :3], plugin="pillow",
+                            extension=".jpg", quality=PANOPTIC_JPEG_QUALITY, subsampling=0)
+                iio.imwrite(out / "seg" / str(v) / f"{i:06d}.png", rgba[..., 3], plugin="pillow", extension=".png")
+        (out / name).write_text(json.dumps(meta, indent=1))
 
 
 def _resolution(resolution):
