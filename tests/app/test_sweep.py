@@ -146,6 +146,27 @@ def test_resume_plan_skips_done_points_and_never_overwrites_another_config(tmp_p
     assert load_config(tmp_path / second.name / "config.toml") == cfg
 
 
+def test_a_finished_point_on_a_scene_with_its_own_window_and_background_is_skipped(tmp_path):
+    """A generated scene's own max_time and background (scene.json) go into the run's config.toml
+    where the grid left the defaults; planning the same grid again must skip the finished point,
+    and a grid that sets another max_time must still be refused."""
+    sweep = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']"))
+    (point,) = sweep.points
+    cfg = point_config(point, None, tmp_path / "data" / "toss")
+    own = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, max_time=0.7368, background=(0.0, 0.0, 0.0)))
+    run = tmp_path / point.name
+    run.mkdir()
+    (run / "config.toml").write_text(to_toml(own))
+    (run / "metrics.json").write_text("{}")
+    assert plan_point(point, None, tmp_path).action == "skip"
+    other = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']\n[grid.set]\n'data.max_time' = [0.5]"))
+    (set_point,) = other.points
+    (tmp_path / set_point.name).mkdir()
+    (tmp_path / set_point.name / "config.toml").write_text(to_toml(own))
+    (tmp_path / set_point.name / "metrics.json").write_text("{}")
+    assert plan_point(set_point, None, tmp_path).action == "fail"
+
+
 def test_a_finished_point_with_the_default_form_is_skipped(tmp_path):
     """A point left at the default "auto" motion form: its run's config.toml holds what the
     backtest chose (velogauss.train.backtest: patterns, mixing start, maybe effects without

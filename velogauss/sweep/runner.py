@@ -56,7 +56,7 @@ def point_config(point, config_path, data_dir):
 
 def plan_point(point, config_path, out_dir):
     """Decide whether `point` is skipped, resumed, trained or failed (see the module docstring)."""
-    from velogauss.config import load_config, resolve_from_run
+    from velogauss.config import DataConfig, load_config, resolve_from_run
 
     run_dir = Path(out_dir) / point.name
     data_dir = Path(point.data) if point.data else Path(out_dir) / "data" / point.scene
@@ -74,9 +74,15 @@ def plan_point(point, config_path, out_dir):
     except ValueError as err:
         previous = err
     # A run folder records the numbers its "auto" keys resolved to, and a resumed run uses them.
-    if not isinstance(previous, ValueError) and cfg.data.split != "time" and previous.data.split == cfg.data.split:
-        # A future split's window end is derived from the data (spec/data.md), so the run's value stands.
-        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, max_time=previous.data.max_time))
+    if not isinstance(previous, ValueError):
+        # A future split's window end is derived from the data (spec/data.md), and a generated
+        # scene's own window end and background apply where the config left the defaults
+        # (velogauss.train.loop.prepare): the run's values stand.
+        own = {key: getattr(previous.data, key) for key in ("max_time", "background")
+               if getattr(cfg.data, key) == getattr(DataConfig(), key)}
+        if cfg.data.split != "time" and previous.data.split == cfg.data.split:
+            own["max_time"] = previous.data.max_time
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, **own))
     if isinstance(previous, ValueError) or resolve_from_run(previous, previous) != resolve_from_run(cfg, previous):
         return Plan(point, run_dir, data_dir, "fail",
                     f"{saved}: the run folder holds a different config; move it away or change `out` "
