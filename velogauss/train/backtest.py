@@ -36,6 +36,7 @@ from velogauss.model.motion import MotionParameters
 from velogauss.model.spec import resolve_motion_spec
 from velogauss.train.frequency import series_frequency
 from velogauss.train.mixing import cluster_targets, separate_patterns
+from velogauss.train.optim import acceleration_group
 from velogauss_core.constants import (BACKTEST_HEAD, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
                                       BACKTEST_PROBE_SHARE, BACKTEST_STEPS, RIGID_HULL_OPACITY)
 from velogauss_core.motion import UNDECLARED_EFFECTS
@@ -184,23 +185,21 @@ def fit(form, effects, times, paths, cfg, rng):
     cluster gets a pattern of its own (`separate_patterns` on those labels); a rigid or
     harmonic pattern starts at its cluster's least-squares fit (`rigid_fit`, `harmonic_fit`).
     Then the velocity field (VG-VEL, codes at the paths' first positions) is fitted by Adam
-    (BACKTEST_STEPS steps at BACKTEST_LR, decaying 100x; rigid spins and knots, oscillators'
-    coefficients and the acceleration at the training's ratio of `train.lr_acc` to
-    `train.lr_motion`) to the paths' velocities, their finite differences in time."""
+    (BACKTEST_STEPS steps at BACKTEST_LR, decaying 100x; the acceleration group of the time
+    network's candidate at the training's ratio of `train.lr_acc` to `train.lr_motion`) to the
+    paths' velocities, their finite differences in time."""
     spec = candidate_spec(form, effects, cfg, float(times[-1]))
     motion = MotionParameters(spec, rng)
     x0 = torch.as_tensor(paths[0], dtype=torch.float32)
     velocities = np.gradient(paths, times, axis=0)
     labels = cluster_paths(paths, min(BACKTEST_CLUSTERS, spec.n_patterns), rng)
     separate_patterns(motion, x0, rng, labels=labels)
-    omega = series_frequency(times, paths.reshape(len(times), -1), float(times[-1]))
-    if form != "mlp":
-        _start_patterns(motion, form, times, paths, velocities, labels, omega)
-    fast = [motion.acc] if spec.acceleration else []
     if form == "rigid":
-        fast.append(motion.time)
+        _start_patterns(motion, form, times, paths, velocities, labels, None)
     elif form == "harmonic":
-        fast.append(motion.time[0])
+        omega = series_frequency(times, paths.reshape(len(times), -1), float(times[-1]))
+        _start_patterns(motion, form, times, paths, velocities, labels, omega)
+    fast = acceleration_group(motion)
     slow = [p for p in motion.parameters() if all(p is not f for f in fast)]
     # Started at their least-squares fit, the fast group refines at the networks' rate; the
     # time network starts still and takes the training's ratio of the two.

@@ -33,21 +33,29 @@ def make_optimizer(model, train_cfg, extent):
            "opacity_logits": t.lr_opacity, "sh_dc": t.lr_sh, "sh_rest": t.lr_sh / 20.0}
     groups = [{"params": [getattr(model.gaussians, name)], "lr": lrs[name], "name": name} for name in FIELDS]
     if model.motion is not None:
-        acc = [model.motion.acc] if model.spec.acceleration else []
-        if model.spec.rigid_patterns:
-            acc.append(model.motion.time)
-        if model.spec.velocity == "affine" and model.spec.pattern_form == "harmonic":
-            # C, not the frequency (VG-COEF-HARM): Adam moves a parameter by about its rate
-            # per step whatever its gradient, and the shared frequency, started where the
-            # video oscillates, is barely determined while the curriculum's window is shorter
-            # than a period, so at the larger rate it drifts.
-            acc.append(model.motion.time[0])
+        acc = acceleration_group(model.motion)
         networks = [p for p in model.motion.parameters() if all(p is not a for a in acc)]
         groups.append({"params": networks, "lr": t.lr_motion, "name": "motion"})
         if acc:
             groups.append({"params": acc, "lr": t.lr_acc, "name": "acc"})
     # foreach: one call per step for all the tensors, not a dozen Python-level ops per tensor.
     return torch.optim.Adam(groups, lr=0.0, eps=ADAM_EPS, foreach=True)
+
+
+def acceleration_group(motion):
+    """The parameters of `motion` (velogauss.model.motion.MotionParameters) trained at the
+    acceleration's larger rate: Q, rigid patterns' spins and knots, oscillators' coefficients."""
+    spec = motion.spec
+    acc = [motion.acc] if spec.acceleration else []
+    if spec.rigid_patterns:
+        acc.append(motion.time)
+    if spec.velocity == "affine" and spec.pattern_form == "harmonic":
+        # C, not the frequency (VG-COEF-HARM): Adam moves a parameter by about its rate
+        # per step whatever its gradient, and the shared frequency, started where the
+        # video oscillates, is barely determined while the curriculum's window is shorter
+        # than a period, so at the larger rate it drifts.
+        acc.append(motion.time[0])
+    return acc
 
 
 def set_learning_rates(optimizer, iteration, train_cfg, extent):
