@@ -219,9 +219,10 @@ STAGE_CHUNK = 256
 # the run's iterations: its schedule then opens the whole window by a third of its length, as
 # the run's does, and the run costs a third more.
 BACKTEST_PROBE_SHARE = 1.0 / 3.0
-# The candidates are fitted on the paths at t <= this share of the window and scored on the
-# rest: forecasting's usual 70/30 split, which leaves the tail several frames at 16 or more.
-BACKTEST_HEAD = 0.7
+# The candidates are fitted on the paths at t <= each of these shares of the window and scored
+# on the rest (forecasting's rolling origin): a form that forecasts well only from the longest
+# head fits, not predicts, and every tail keeps several frames at 16 or more.
+BACKTEST_HEADS = (0.5, 0.6, 0.7)
 # At most this many Gaussians' paths (a random subset of the moving, opaque ones) and frame
 # times (evenly picked) enter the fits: the mean over points of a body's smooth motion is
 # settled well before 1,000 of them, and 24 times resolve 3 cycles over the window.

@@ -8,16 +8,19 @@ the video alone, never from a scene's name or declared effects:
    iterations, its schedule scaled with it) recovers the Gaussians' trajectories over the
    observed window [0, T];
 2. `probe_paths`: the moving, opaque Gaussians' positions at the training frame times;
-3. `backtest`: each candidate form (`CANDIDATES`: the time network, rigid bodies whose centres
-   accelerate or drift, oscillators) is fitted, as the velocity model alone (the "no-adf"
-   motion), to the paths' velocities on the head of the window t <= `BACKTEST_HEAD` T, then
-   integrated from the head's last positions over the held-out tail, and scored by the tail's
-   RMS position error over the RMS of its motion since the head's end (1 is as bad as
-   freezing the motion there);
-4. the form with the lowest score below 1, else the time network, is the run's
-   `model.patterns` (and, for a drifting rigid centre, its effects without gravity); the run
-   then trains from scratch with it, as if it had been set. config.toml records it, and the
-   run folder's `motion_form.json` holds every candidate's score.
+3. `backtest`: each candidate form (`CANDIDATES`: rigid bodies whose centres drift or
+   accelerate, oscillators, the time network) is fitted, as the velocity model alone (the
+   "no-adf" motion), to the paths' velocities on the head of the window t <= h T, then
+   integrated from the head's last positions over the held-out rest, and scored by the RMS
+   position error there over the RMS of the motion since the head's end (1 is as bad as
+   freezing the motion there), at each forecast origin h of `BACKTEST_HEADS` (forecasting's
+   rolling origin);
+4. `select`: walking the candidates from the fewest free parameters to the most, a richer form
+   replaces the choice only when it predicts better at every origin; the choice stands when its
+   mean score is below 1, else the time network. That is the run's `model.patterns` (and, for a
+   drifting rigid centre, its effects without gravity); the run then trains from scratch with
+   it, as if it had been set. config.toml records it, and the run folder's `motion_form.json`
+   holds every candidate's scores.
 
 The probe also says whether still Gaussians lie beside moving ones (`model.mixing_init =
 "auto"`: the mixing weights then start apart) and, for oscillators, the paths' own frequency,
@@ -37,7 +40,7 @@ from velogauss.model.spec import resolve_motion_spec
 from velogauss.train.frequency import series_frequency
 from velogauss.train.mixing import cluster_targets, separate_patterns
 from velogauss.train.optim import acceleration_group
-from velogauss_core.constants import (BACKTEST_HEAD, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
+from velogauss_core.constants import (BACKTEST_HEADS, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
                                       BACKTEST_PROBE_SHARE, BACKTEST_STEPS, RIGID_HULL_OPACITY)
 from velogauss_core.motion import UNDECLARED_EFFECTS
 from velogauss_fast.motion.basis import affine_from_coefficients, basis_matrix
@@ -46,30 +49,32 @@ from velogauss_fast.motion.coefficients import (masked, mixing_weights, motion_p
                                                  rigid_velocity_patterns)
 from velogauss_fast.motion.trajectory import base_state
 
-# The candidates, in order of preference on a tie: name -> (pattern form, the effects it may
-# keep of the run's). "rigid" keeps gravity (3 knots: a centre under a constant acceleration),
-# "rigid-drift" drops it (2 knots); None keeps them all.
+# The candidates, from the fewest free parameters per pattern to the most: name -> (pattern
+# form, the effects it may keep of the run's). "rigid-drift" drops gravity (2 knots: 9
+# numbers), "rigid" keeps it (3 knots, a centre under a constant acceleration: 12), the
+# oscillators have 37, the time network thousands; None keeps every effect.
 CANDIDATES = {
-    "mlp": ("mlp", None),
-    "rigid": ("rigid", ("translation", "rotation", "gravity", "static")),
     "rigid-drift": ("rigid", ("translation", "rotation", "static")),
+    "rigid": ("rigid", ("translation", "rotation", "gravity", "static")),
     "harmonic": ("harmonic", None),
+    "mlp": ("mlp", None),
 }
 
 
 def candidates(effects):
-    """{name: (form, effects)} of CANDIDATES that the run's `effects` (a tuple, or "auto": every
-    effect but oscillation) allow: a rigid candidate keeps its share of them and needs translation
-    or rotation among it; "rigid-drift" is left out when the effects hold no gravity (it would be
-    "rigid" again)."""
+    """{name: (form, effects)} of CANDIDATES, in their order, that the run's `effects` (a tuple,
+    or "auto": every effect but oscillation) allow: a rigid candidate keeps its share of them and
+    needs translation or rotation among it; "rigid-drift" is left out when the effects hold no
+    gravity (it would be "rigid" again)."""
     base = UNDECLARED_EFFECTS if effects == "auto" else tuple(effects)
     out = {}
     for name, (form, keep) in CANDIDATES.items():
         kept = base if keep is None else tuple(e for e in base if e in keep)
         if keep is not None and not {"translation", "rotation"} & set(kept):
             continue
-        if kept not in [k for _, k in out.values() if _ == form]:
-            out[name] = (form, kept)
+        if name == "rigid-drift" and kept == tuple(e for e in base if e in CANDIDATES["rigid"][1]):
+            continue
+        out[name] = (form, kept)
     return out
 
 
@@ -97,17 +102,17 @@ def choose_form(cfg, data, run, progress=False):
     if mixing == "auto":
         # Still Gaussians beside moving ones: more than one motion to tell apart from the start.
         mixing = "clusters" if 0.0 < moving_share < 1.0 else "uniform"
-    scores = {}
+    scores, heads = {}, []
     moved = paths.shape[1] > 0
     if moved and len(times) >= 4:  # else nothing moved, or there is no tail to hold out
         scores = backtest(times, paths, cfg, np.random.default_rng(cfg.train.seed))
-    # The time network unless a law predicts the tail better than freezing the motion does.
-    choice = min(scores, key=scores.get) if scores and min(scores.values()) < 1.0 else "mlp"
+        heads = [float(times[last]) for last in origins(times)]
+    choice = select(scores)
     form, effects = candidates(m.effects)[choice]
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
     model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects)
     frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
-    report.update({"scores": scores, "choice": choice, "mixing_init": mixing, "frequency": frequency,
+    report.update({"origins": heads, "scores": scores, "choice": choice, "mixing_init": mixing, "frequency": frequency,
                    "probe_s": probe_s, "backtest_s": time.perf_counter() - clock - probe_s})
     return dataclasses.replace(cfg, model=model_cfg), report
 
@@ -154,21 +159,39 @@ def probe_paths(model, data, rng):
     return times, paths
 
 
+def select(scores):
+    """The chosen candidate (module docstring, step 4) of `scores` {name: [score per origin]}, in
+    CANDIDATES' order: "mlp" when there are none or the choice's mean score is not below 1 (the
+    paths show no law that predicts better than freezing the motion)."""
+    choice = None
+    for name, row in scores.items():
+        if choice is None or all(a < b for a, b in zip(row, scores[choice])):
+            choice = name
+    return choice if choice is not None and np.mean(scores[choice]) < 1.0 else "mlp"
+
+
+def origins(times):
+    """The heads' last indices (sorted, distinct) into `times` (J >= 4,): per h of BACKTEST_HEADS
+    the last time <= h times[-1], with at least 3 times to fit (a parabola) and 1 to score."""
+    lasts = []
+    for share in BACKTEST_HEADS:
+        last = int(np.flatnonzero(times <= share * times[-1] + 1e-9)[-1])
+        lasts.append(min(max(last, 2), len(times) - 2))
+    return sorted(set(lasts))
+
+
 def backtest(times, paths, cfg, rng):
-    """{candidate: tail score} (module docstring, step 3) for the paths (J, M, 3) at J >= 4
-    `times`: each candidate fitted on the head, then integrated from the head's last positions."""
-    head = times <= BACKTEST_HEAD * times[-1] + 1e-9
-    if head.sum() < 3 or head.all():  # at least 3 times to fit (a parabola) and 1 to score
-        head = np.arange(len(times)) < max(3, len(times) - 1)
-    tail = ~head
-    last = int(np.flatnonzero(head)[-1])
-    spread = np.sqrt(((paths[tail] - paths[last]) ** 2).sum(-1).mean())
-    scores = {}
-    for name, (form, effects) in candidates(cfg.model.effects).items():
-        motion = fit(form, effects, times[head], paths[head], cfg, rng)
-        predicted = predict(motion, paths[0], paths[last], times[last:])[1:]
-        error = np.sqrt(((predicted - paths[tail]) ** 2).sum(-1).mean())
-        scores[name] = float(error / max(spread, 1e-12))
+    """{candidate: [tail score per origin]} (module docstring, step 3) for the paths (J, M, 3) at
+    J >= 4 `times`: at each origin (`origins`) each candidate is fitted on the head, then
+    integrated from the head's last positions over the rest."""
+    scores = {name: [] for name in candidates(cfg.model.effects)}
+    for last in origins(times):
+        spread = np.sqrt(((paths[last + 1:] - paths[last]) ** 2).sum(-1).mean())
+        for name, (form, effects) in candidates(cfg.model.effects).items():
+            motion = fit(form, effects, times[:last + 1], paths[:last + 1], cfg, rng)
+            predicted = predict(motion, paths[0], paths[last], times[last:])[1:]
+            error = np.sqrt(((predicted - paths[last + 1:]) ** 2).sum(-1).mean())
+            scores[name].append(float(error / max(spread, 1e-12)))
     return scores
 
 
