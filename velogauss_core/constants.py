@@ -237,3 +237,8 @@ BACKTEST_LR = 3e-3
 # starts and how it moves) a pattern of its own: enough to part 3 bodies and a ground, each
 # into a few pieces, while every cluster keeps dozens of points to fit.
 BACKTEST_CLUSTERS = 8
+# The training keeps each image's float copy and its half of SSIM (9 floats a pixel) between
+# steps for at most this many bytes of images, the rest recomputed from the 8-bit pixels at each
+# use: every catalogue and D-NeRF scene up to 800 px fits, while a capture of thousands of
+# frames trains in bounded memory (spec/data.md, "Memory").
+TARGET_CACHE_BYTES = 4 * 2**30

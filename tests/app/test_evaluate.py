@@ -22,8 +22,9 @@ def _camera():
     return Camera(look_at(np.array([0.0, -4.0, 1.0]), np.zeros(3)), intrinsics_from_fov(0.7, SIZE, SIZE), SIZE, SIZE)
 
 
-def _frame(time, value):
-    return Frame(np.full((SIZE, SIZE, 3), value, dtype=np.float32), time, _camera(), f"test/r_{time:.2f}.png")
+def _frame(time, level):
+    """A flat frame of the 8-bit `level` (images are kept as 8 bits: spec/data.md), value level / 255."""
+    return Frame(np.full((SIZE, SIZE, 3), level, dtype=np.uint8), time, _camera(), f"test/r_{time:.2f}.png")
 
 
 class ConstantImageModel:
@@ -85,10 +86,10 @@ def test_mean_over_frames_and_missing_metrics():
 
 
 def test_split_bookkeeping_per_frame_and_mean():
-    # Frame k has ground truth 0.5 and prediction 0.5 + d_k: PSNR_k = -20 log10(d_k).
+    # Frame k has ground truth 128/255 and prediction 128/255 + d_k: PSNR_k = -20 log10(d_k).
     offsets = {0.1: 0.1, 0.3: 0.01}
-    model = ConstantImageModel(lambda t: 0.5 + offsets[round(t, 6)])
-    frames = [_frame(t, 0.5) for t in offsets]
+    model = ConstantImageModel(lambda t: 128 / 255 + offsets[round(t, 6)])
+    frames = [_frame(t, 128) for t in offsets]
     split = evaluate.evaluate_split(model, frames, np.ones(3), name="interpolation")
     assert split["count"] == 2
     assert [r["time"] for r in split["frames"]] == pytest.approx([0.1, 0.3])
@@ -100,11 +101,11 @@ def test_split_bookkeeping_per_frame_and_mean():
 
 def test_freeze_baseline_renders_at_max_time():
     model = ConstantImageModel(lambda t: t)  # brightness = time: a perfect "motion" model
-    frames = [_frame(0.8, 0.8), _frame(0.9, 0.9)]
+    frames = [_frame(204 / 255, 204), _frame(230 / 255, 230)]  # times 0.8 and 0.902, brightness = time
     base = evaluate.freeze_baseline(model, frames, np.ones(3), max_time=0.75)
     assert model.calls == [0.75, 0.75]
-    # Frozen at 0.75: errors 0.05 and 0.15 -> PSNR 26.0206 and 16.4782 dB.
-    expected = [-20 * math.log10(0.05), -20 * math.log10(0.15)]
+    # Frozen at 0.75: errors 0.05 and 230/255 - 0.75 -> PSNR 26.0206 and 16.3659 dB.
+    expected = [-20 * math.log10(0.05), -20 * math.log10(230 / 255 - 0.75)]
     assert [r["psnr"] for r in base["frames"]] == pytest.approx(expected, abs=1e-3)
     assert base["mean"]["psnr"] == pytest.approx(np.mean(expected), abs=1e-3)
     own = evaluate.evaluate_split(model, frames, np.ones(3), name="extrapolation")
@@ -246,8 +247,8 @@ def test_lpips_is_skipped_with_a_note_when_no_default_weights_exist(monkeypatch)
     monkeypatch.setattr(evaluate, "weights_file", nowhere)
     usable, note = evaluate.lpips_status()
     assert not usable and note.startswith("skipped: LPIPS weights alex.npz not found")
-    model = ConstantImageModel(lambda t: 0.6)
-    split = evaluate.evaluate_split(model, [_frame(0.1, 0.5)], np.ones(3), name="interpolation")
+    model = ConstantImageModel(lambda t: 128 / 255 + 0.1)
+    split = evaluate.evaluate_split(model, [_frame(0.1, 128)], np.ones(3), name="interpolation")
     assert set(split["frames"][0]) == {"path", "time", "psnr", "ssim"}
     assert split["mean"]["lpips_alex"] is None and split["mean"]["psnr"] == pytest.approx(20.0, abs=1e-3)
 
@@ -255,6 +256,6 @@ def test_lpips_is_skipped_with_a_note_when_no_default_weights_exist(monkeypatch)
 def test_an_explicit_lpips_folder_must_hold_the_weights(tmp_path):
     assert evaluate.lpips_status(tmp_path) == (True, str(tmp_path))
     model = ConstantImageModel(lambda t: 0.6)
-    frame = _frame(0.1, 0.5)
+    frame = _frame(0.1, 128)
     with pytest.raises(FileNotFoundError, match="weights_dir: LPIPS weights"):
         evaluate.evaluate_split(model, [frame], np.ones(3), lpips_weights=tmp_path)

@@ -22,7 +22,7 @@ BAND = 0.02
 def _frame(eye, time=0.0, fov=1.2, size=64):
     camera = Camera(look_at(eye, (eye[0], eye[1], 0.0), up=(0.0, 1.0, 0.0)), intrinsics_from_fov(fov, size, size),
                     size, size)
-    return Frame(np.zeros((size, size, 3), np.float32), time, camera, "synthetic")
+    return Frame(np.zeros((size, size, 3), np.uint8), time, camera, "synthetic")
 
 
 def _ball(motion=None, centre=(0.0, 0.0, 0.0)):

@@ -68,13 +68,25 @@ _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 @dataclass(frozen=True, eq=False)
 class Frame:
-    """One image: `image (H, W, 3)` float32 in [0, 1] (composited), normalised `time`,
-    its `camera`, and the image file's `path`."""
+    """One image: `pixels (H, W, 3)` uint8 (composited, then kept as 8 bits: `quantized`),
+    normalised `time`, its `camera`, and the image file's `path`."""
 
-    image: np.ndarray
+    pixels: np.ndarray
     time: float
     camera: Camera
     path: str
+
+    @property
+    def image(self):
+        """(H, W, 3) float32 in [0, 1]: `pixels` / 255, a new array on each call."""
+        return self.pixels.astype(np.float32) / np.float32(255)
+
+
+def quantized(image):
+    """(H, W, 3) uint8 of a float image (values clipped to [0, 1]): round(255 c). Images are
+    kept as 8 bits so that thousands of frames fit in memory (spec/data.md, "Memory"); the
+    rounding error is at most 1/510."""
+    return np.rint(np.clip(image, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
 @dataclass(frozen=True, eq=False)
@@ -224,7 +236,7 @@ def assemble_scene(root, train, interpolation, extrapolation, *, max_time, split
             if half_res:
                 image = _halve(image)
                 camera = camera.downsampled(2)
-            frames.append(Frame(image, record["time"], camera, str(record["image"])))
+            frames.append(Frame(quantized(image), record["time"], camera, str(record["image"])))
         loaded[part] = frames
 
     if metadata is not None and "bounds" in metadata:

@@ -51,9 +51,10 @@ from velogauss.train import aux_losses, aux_worker
 from velogauss.train.adf_backward_thread import adf_evaluation
 from velogauss.train.sampling import FrameSampler, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
+from velogauss.train.targets import TrainingTargets
 from velogauss_fast.backends import numba_backend
 from velogauss_fast.losses import photometric_loss
-from velogauss_fast.metrics import psnr, ssim_target
+from velogauss_fast.metrics import psnr
 from velogauss_core.constants import STATIC_MOTION_PX
 from velogauss_core.motion import spec_from_dict
 
@@ -192,9 +193,8 @@ class Trainer:
         self.rng, self.extent, self.state, self.device = rng, extent, state, device
         # What the motion computes and which losses are on, resolved once when the model was built.
         self.spec = model.spec
-        self.images = [torch.as_tensor(f.image, device=device) for f in data.train]
-        # Each training image's half of SSIM, once: every step compares renders with them.
-        self.ssim_targets = [ssim_target(image) for image in self.images]
+        # The images and their halves of SSIM, kept between steps within a memory budget.
+        self.targets = TrainingTargets(data.train, device)
         # The distinct training cameras (multi-view video repeats each pose at every time).
         self.cameras = list({(f.camera.viewmat.tobytes(), f.camera.K.tobytes()): f.camera for f in data.train}.values())
         self.sampler = FrameSampler([f.time for f in data.train], cfg.train.warmup, cfg.train.curriculum,
@@ -290,7 +290,7 @@ class Trainer:
         self.optimizer.step()
         with torch.no_grad():
             image = renders[0][0]
-            frame_psnr = float(psnr(image.detach().clamp(0, 1), self.images[indices[0]]))
+            frame_psnr = float(psnr(image.detach().clamp(0, 1), self.targets[indices[0]][0]))
         return float(loss.detach()) + aux_value, frame_psnr
 
     def render_threads(self):
@@ -316,7 +316,7 @@ class Trainer:
             image, _, meta = render_gaussians(gaussians, frame.camera, self.background)
             if meta["mean2d"].requires_grad:  # not when nothing trainable moves them (train.motion_only)
                 meta["mean2d"].retain_grad()
-            loss = loss + photometric_loss(image, self.images[index], self.ssim_targets[index]) / len(frames)
+            loss = loss + photometric_loss(image, *self.targets[index]) / len(frames)
             renders.append((image, meta, frame.camera))
         if motion_on and self.spec.adf_loss:
             loss = loss + self.cfg.train.lambda_adf * ((means - base) ** 2).sum(1).mean()
