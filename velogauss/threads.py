@@ -19,6 +19,10 @@ benchmarks/RESULTS.md, "Where contention comes from" and "Contention"). So, by d
 
 `--threads N` (config `train.threads`, 0 = the default above) gives torch and the
 compositing kernels N threads each.
+
+A script that uses `velogauss_fast` as a library gets the same policy from two public calls
+(docs/usage.md, "Threads, from your own script"): `prepare_environment()` before torch is
+imported, and `apply_threads(n=0)` after.
 """
 
 import os

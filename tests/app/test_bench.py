@@ -206,6 +206,29 @@ def test_step_ratio_quick(tmp_path):
     assert result["losses"][1] == pytest.approx(result["losses"][0], rel=1e-5)
 
 
+def test_library_quick_times_a_users_script_of_both_trees(tmp_path):
+    _needs_before()
+    out = tmp_path / "RESULTS.md"
+    bench("library", "--quick", "--before", BEFORE, "--out", out)
+    body = section(out.read_text(), "Library use")
+    assert f"Regenerate: `velogauss bench library --before {BEFORE} --quick`" in body
+    header, rows = table(body)
+    assert header == ["tree", "backend", "idle (ms)", "beside a busy 2-thread torch process (ms)", "slowdown"]
+    assert [row[:2] for row in rows] == [[f"`{BEFORE}`", "numba"], [f"`{BEFORE}`", "torch"], ["this tree", "numba"],
+                                         ["this tree", "torch"]]
+    for row in rows:
+        idle, busy = float(row[2]), float(row[3])
+        assert idle > 0 and busy > 0
+        # One round: the slowdown is the table's own times divided (times rounded to 0.1 ms).
+        assert float(row[4].rstrip("x")) == pytest.approx(busy / idle, rel=0.1, abs=0.01)
+
+
+def test_library_refuses_a_gpu(tmp_path):
+    result = CliRunner().invoke(app, ["bench", "library", "--device", "cuda", "--out", str(tmp_path / "R.md")])
+    assert result.exit_code != 0 and "the library benchmark measures CPU threads" in result.output
+    assert not (tmp_path / "R.md").exists()
+
+
 def test_a_cuda_run_adds_its_own_section_and_keeps_the_cpu_one(tmp_path):
     out = tmp_path / "R.md"
     write_section(out, device_section("## Rasterizer", "cpu"), "## Rasterizer\n\ncpu numbers")

@@ -44,7 +44,7 @@ def test_kernels_visit_the_pair_tables_pairs(seed, dtype, n_parts):
     scene["scales"][::3, 2] = 1e-9
     proj, t, spans = spans_of(scene, dtype)
     pairs = pair_table(spans)
-    prm = _parameters(t["colors"], spans).numpy()
+    prm = _parameters(t["colors"], spans)
     counts = np.zeros(n_parts, dtype=np.int64)
     numba_kernels.count_pairs(n_parts, prm, scene["width"], counts)
     assert counts.sum() == len(pairs.gid)

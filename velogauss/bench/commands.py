@@ -202,6 +202,23 @@ def step_ratio_command(
             quick=quick, gaussians=gaussians)
 
 
+@bench_app.command("library")
+def library_command(
+    before: Optional[str] = typer.Option(None, "--before", metavar="REVISION",
+                                         help="Also time the tree at this git revision, interleaved."),
+    rounds: Optional[int] = typer.Option(None, help="Alternating rounds (default: 5; 1 with --quick)."),
+    seconds: Optional[float] = typer.Option(None, help="Wall time of each measurement (default: 4; 0.2 with --quick)."),
+    quick: bool = _QUICK,
+    device: str = _CPU_ONLY,
+    out: Path = _OUT,
+):
+    """Library use under contention: a user's script rendering, idle and beside a busy torch
+    process (velogauss.bench.library)."""
+    from velogauss.bench import library
+
+    _record(library.run, out, device=device, before=before, rounds=rounds, seconds=seconds, quick=quick)
+
+
 FIDELITY_ACTIONS = ("run", "table", "rescore", "pareto")
 
 

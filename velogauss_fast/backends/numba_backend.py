@@ -79,7 +79,34 @@ def _run_parts(kernel, n_parts, *args):
 
 def _parameters(rgb, spans):
     """The kernels' (n, N_COLUMNS) float64 parameter rows, in depth order: spans.geom, then rgb."""
-    return torch.cat([spans.geom, rgb.detach().index_select(0, spans.ids).to(torch.float64)], dim=1)
+    geom = spans.geom.numpy()
+    prm = np.empty((geom.shape[0], geom.shape[1] + 3))
+    prm[:, :geom.shape[1]] = geom
+    np.take(as_float64(rgb), spans.ids.numpy(), axis=0, out=prm[:, geom.shape[1]:])
+    return prm
+
+
+def as_float64(x):
+    """A float64, C-contiguous NumPy array of CPU tensor x (a view when x already is one).
+
+    The backends' glue between torch and the kernels is NumPy, never torch: a torch operation
+    opens an OpenMP region on each of torch's threads, whose workers spin against a busy
+    process beside a library user's script (benchmarks/RESULTS.md, "Library use"); NumPy's
+    casts, copies and sums run on the calling thread. bfloat16, which NumPy does not hold, is
+    cast by torch."""
+    x = x.detach()
+    if x.dtype == torch.bfloat16:
+        x = x.to(torch.float64)
+    return np.ascontiguousarray(x.numpy(), dtype=np.float64)
+
+
+def as_tensor(a, dtype):
+    """Tensor of `dtype` (float32 or float64) from NumPy array a, cast by NumPy (see `as_float64`).
+    Other dtypes (half precision, which NumPy may not hold) are cast by torch."""
+    target = {torch.float32: np.float32, torch.float64: np.float64}.get(dtype)
+    if target is None:
+        return torch.from_numpy(a).to(dtype)
+    return torch.from_numpy(np.ascontiguousarray(a, dtype=target))
 
 
 class CompositeNumba(torch.autograd.Function):
@@ -101,36 +128,35 @@ class CompositeNumba(torch.autograd.Function):
         done = np.zeros(n_pix, dtype=np.uint8)
         n_parts = max(1, min(get_num_threads(), spans.height))
         counts = np.zeros(n_parts, dtype=np.int64)
-        nk.count_pairs(n_parts, prm.numpy(), spans.width, counts)
+        nk.count_pairs(n_parts, prm, spans.width, counts)
         alphas = [np.empty(c) for c in counts]
-        _run_parts(_forward_part, n_parts, prm.numpy(), spans.width, color, trans, last, done, alphas)
-        T_final = torch.from_numpy(trans)
-        image = torch.from_numpy(color) + T_final[:, None] * background.detach().to(torch.float64)
-        ctx.save_for_backward(prm, T_final, torch.from_numpy(last), background)
+        _run_parts(_forward_part, n_parts, prm, spans.width, color, trans, last, done, alphas)
+        image = color + trans[:, None] * as_float64(background)
+        ctx.save_for_backward(background)
+        ctx.prm, ctx.trans, ctx.last = prm, trans, last
         ctx.spans, ctx.alphas = spans, alphas
         ctx.n = mean2d.shape[0]
         dtype = mean2d.dtype
-        return image.to(dtype), T_final.to(dtype)
+        return as_tensor(image, dtype), as_tensor(trans, dtype)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_image, g_T):
-        prm, T_final, last, background = ctx.saved_tensors
-        spans, dtype = ctx.spans, background.dtype
-        f64 = torch.float64
-        g_image = g_image.to(f64).contiguous()
+        (background,) = ctx.saved_tensors
+        prm, T_final, last, spans, dtype = ctx.prm, ctx.trans, ctx.last, ctx.spans, background.dtype
+        g_image = as_float64(g_image)
         # image = ... + T_final * background: the background term joins dL/dT_final.
-        g_tf = g_T.to(f64) + g_image @ background.to(f64)
-        g_background = (g_image * T_final[:, None]).sum(0).to(dtype)
+        g_tf = as_float64(g_T) + g_image @ as_float64(background)
+        g_background = as_tensor(T_final @ g_image, dtype)
         alphas = ctx.alphas
         n_parts = len(alphas)
         grads = np.zeros((n_parts, prm.shape[0], nk.N_GRAD))
-        _run_parts(_backward_part, n_parts, prm.numpy(), spans.width, g_image.numpy(), T_final.numpy().copy(),
-                   (T_final * g_tf).numpy(), last.numpy(), alphas, grads)
+        _run_parts(_backward_part, n_parts, prm, spans.width, g_image, T_final.copy(), T_final * g_tf, last,
+                   alphas, grads)
         # Parts summed in a fixed order: the result does not depend on thread scheduling.
-        per_gaussian = torch.zeros(ctx.n, nk.N_GRAD, dtype=f64)
-        per_gaussian.index_copy_(0, spans.ids, torch.from_numpy(grads.sum(0)))
-        g_mean2d, g_conic, g_opacity, g_rgb = per_gaussian.to(dtype).split([2, 3, 1, 3], dim=1)
+        per_gaussian = np.zeros((ctx.n, nk.N_GRAD))
+        per_gaussian[spans.ids.numpy()] = grads.sum(0)
+        g_mean2d, g_conic, g_opacity, g_rgb = as_tensor(per_gaussian, dtype).split([2, 3, 1, 3], dim=1)
         return g_mean2d, g_conic, g_opacity.squeeze(1), g_rgb, g_background, None
 
 

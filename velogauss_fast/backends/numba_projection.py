@@ -14,11 +14,7 @@ import torch
 
 from velogauss_core.rendering import dilation
 from velogauss_fast.backends import numba_projection_kernels as nk
-
-
-def _f64(x):
-    """A float64 NumPy copy of tensor x (a view when x already is one, contiguous on the CPU)."""
-    return x.detach().to(torch.float64).contiguous().numpy()
+from velogauss_fast.backends.numba_backend import as_float64, as_tensor
 
 
 class ProjectNumba(torch.autograd.Function):
@@ -34,11 +30,11 @@ class ProjectNumba(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, sh, viewmat, K, width, height, eps2d, sh_degree, antialiased):
         n, dtype = means.shape[0], means.dtype
-        vm = _f64(viewmat)
-        sh64 = np.zeros((n, 0, 3)) if sh is None else _f64(sh)
-        args = (_f64(means), _f64(quats), _f64(scales), _f64(opacities), sh64, -1 if sh_degree is None else sh_degree,
+        vm = as_float64(viewmat)
+        sh64 = np.zeros((n, 0, 3)) if sh is None else as_float64(sh)
+        args = (as_float64(means), as_float64(quats), as_float64(scales), as_float64(opacities), sh64, -1 if sh_degree is None else sh_degree,
                 np.ascontiguousarray(vm[:3, :3]), np.ascontiguousarray(vm[:3, 3]),
-                _f64(torch.stack([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])), float(width), float(height), float(eps2d),
+                as_float64(K)[[0, 1, 0, 1], [0, 1, 2, 2]], float(width), float(height), float(eps2d),
                 bool(antialiased))
         mean2d, depth, cov2d, conic = np.empty((n, 2)), np.empty(n), np.empty((n, 2, 2)), np.empty((n, 3))
         compensation, opacity_out, rgb = np.empty(n), np.empty(n), np.zeros((n, 3))
@@ -47,7 +43,7 @@ class ProjectNumba(torch.autograd.Function):
         ctx.args, ctx.dtype, ctx.has_sh = args, dtype, sh is not None
         radius, valid = torch.from_numpy(radius), torch.from_numpy(valid).bool()
         ctx.mark_non_differentiable(radius, valid)
-        floats = (torch.from_numpy(a).to(dtype) for a in (mean2d, depth, cov2d, conic, compensation, opacity_out, rgb))
+        floats = (as_tensor(a, dtype) for a in (mean2d, depth, cov2d, conic, compensation, opacity_out, rgb))
         return (*floats, radius, valid)
 
     @staticmethod
@@ -58,11 +54,11 @@ class ProjectNumba(torch.autograd.Function):
         n = means.shape[0]
         g_means, g_quats, g_scales, g_opacities = np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 3)), np.empty(n)
         g_sh = np.empty(sh.shape)
-        nk.project_backward(*args, _f64(g_mean2d), _f64(g_depth), _f64(g_cov2d), _f64(g_conic),
-                            _f64(g_compensation), _f64(g_opacity), _f64(g_rgb),
+        nk.project_backward(*args, as_float64(g_mean2d), as_float64(g_depth), as_float64(g_cov2d), as_float64(g_conic),
+                            as_float64(g_compensation), as_float64(g_opacity), as_float64(g_rgb),
                             g_means, g_quats, g_scales, g_opacities, g_sh)
-        out = [torch.from_numpy(a).to(dtype) for a in (g_means, g_quats, g_scales, g_opacities)]
-        return (*out, torch.from_numpy(g_sh).to(dtype) if ctx.has_sh else None, *(None,) * 7)
+        out = [as_tensor(a, dtype) for a in (g_means, g_quats, g_scales, g_opacities)]
+        return (*out, as_tensor(g_sh, dtype) if ctx.has_sh else None, *(None,) * 7)
 
 
 def prepare_numba(means, quats, scales, opacities, colors, viewmat, K, width, height, sh_degree, mode):
