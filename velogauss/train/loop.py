@@ -290,7 +290,7 @@ class Trainer:
         self.optimizer.step()
         with torch.no_grad():
             image = renders[0][0]
-            frame_psnr = float(psnr(image.detach().clamp(0, 1), self.targets[indices[0]][0]))
+            frame_psnr = float(psnr(image.detach().clamp(0, 1), self.targets.image(indices[0])))
         return float(loss.detach()) + aux_value, frame_psnr
 
     def render_threads(self):

@@ -30,10 +30,17 @@ class TrainingTargets:
     def __len__(self):
         return len(self.pixels)
 
+    def image(self, index):
+        """The float image (H, W, 3) of training frame i alone: the kept one, else converted
+        without its half of SSIM (the step's PSNR needs no more)."""
+        if index in self._cache:
+            return self._cache[index][0]
+        return self.pixels[index].to(torch.float32) / 255.0
+
     def __getitem__(self, index):
         if index in self._cache:
             return self._cache[index]
-        image = self.pixels[index].to(torch.float32) / 255.0
+        image = self.image(index)
         target = (image, ssim_target(image))
         if index < self.kept:
             self._cache[index] = target
