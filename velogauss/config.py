@@ -75,13 +75,14 @@ class DataConfig:
     format: Literal["auto", "dnerf", "nerfstudio", "panoptic"] = "auto"
     """The scene folder's layout: "dnerf" (transforms_train.json, transforms_test.json), "nerfstudio"
     (transforms.json), "panoptic" (train_meta.json) or "auto", detected from the files (spec/data.md)"""
-    max_time: _float(gt=0.0, lt=1.0) = 0.75
-    """End of the observed window; later frames are the future to predict. Under a "future:F" split it is
-    derived (the last trained frame's time) and recorded so; a value other than 0.75 that differs is an error."""
-    split: Union[Literal["time"], FutureSplit] = "time"
+    max_time: _float(gt=0.0, le=1.0) = 0.75
+    """End of the observed window; later frames are the future to predict. Under a "future:F" or "all" split it
+    is derived (the last trained frame's time) and recorded so; a value other than 0.75 that differs is an error."""
+    split: Union[Literal["time", "all"], FutureSplit] = "time"
     """How frames split into train and future: "time" at max_time, each file's role kept (the default, the layout's
     own split); "future:F" (ODE-GS's D-NeRF protocol) sorts the train and test frames by time and trains on the
-    first round(F n), max_time then being the last one's time (spec/data.md, "Splits")."""
+    first round(F n), max_time then being the last one's time; "all" (D-NeRF's standard protocol) trains on every
+    train frame and scores the test frames as interpolation, with no future (spec/data.md, "Splits")."""
     half_res: Flag = False
     """Load the images at half resolution (quick looks)"""
     background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)

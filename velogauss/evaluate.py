@@ -265,12 +265,13 @@ def summary_markdown(result):
              "|---|---:|---:|---:|---:|---:|"]
     split_rule = result.get("split", "time")
     # Under "future:F" the cut is by count, so a future frame may share the window's end time.
-    future = f"extrapolation (t > {t:g})" if split_rule == "time" else f"extrapolation ({split_rule}, t ≥ {t:g})"
+    future = {"time": f"extrapolation (t > {t:g})", "all": "extrapolation (none: data.split \"all\" observes the whole clip)"
+              }.get(split_rule, f"extrapolation ({split_rule}, t ≥ {t:g})")
     labels = {"interpolation": f"interpolation (t ≤ {t:g})", "extrapolation": future}
     for name, split in result["splits"].items():
         label = labels[name] if split["count"] else f"{labels[name]}: no frames in this split"
         lines.append(_metric_row(label, split["count"], split["mean"]))
-    if result["freeze_baseline"] is not None:
+    if result["freeze_baseline"] is not None and result["freeze_baseline"]["count"]:
         base = result["freeze_baseline"]
         lines.append(_metric_row(f"extrapolation, baseline: last observed frame frozen (t = {t:g})",
                                  base["count"], base["mean"]))

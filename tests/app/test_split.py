@@ -1,4 +1,5 @@
-"""data.split: the "time" split and ODE-GS's "future:F" protocol (spec/data.md, "Splits")."""
+"""data.split: the "time" split, ODE-GS's "future:F" protocol and D-NeRF's standard "all"
+(spec/data.md, "Splits")."""
 
 import json
 import tomllib
@@ -95,6 +96,34 @@ def test_max_time_is_derived_and_may_only_repeat_the_derived_value(scene_dir):
         load_scene(scene_dir, max_time=0.6, split="future:0.8")
 
 
+def test_all_split_trains_every_train_frame_and_scores_the_test_frames(scene_dir):
+    scene = load_scene(scene_dir, split="all")
+    assert _names(scene.train) == [f"train/r_{k:03d}" for k in range(8)]  # file order
+    assert scene.extrapolation == [] and scene.split == "all"
+    assert scene.max_time == 0.7  # the last train frame's time (train/r_007)
+    # Every val frame, then every test frame (none repeats a train or val view here), at any time.
+    assert _names(scene.interpolation) == ["val/r_000", "val/r_001", "val/r_002", "val/r_003"] + [
+        f"test/r_{k:03d}" for k in range(5)]
+    assert load_scene(scene_dir, max_time=0.7, split="all").max_time == 0.7  # what config.toml records
+    with pytest.raises(DataError, match=r"data\.max_time: 0\.6 disagrees with data\.split 'all'.* t = 0\.7"):
+        load_scene(scene_dir, max_time=0.6, split="all")
+
+
+def test_all_split_leaves_out_test_frames_that_repeat_a_train_view(tmp_path):
+    root = _write_scene(tmp_path, {"train": [0.0, 0.5, 1.0], "test": [0.5, 0.25]})
+    record = json.loads((root / "transforms_train.json").read_text())["frames"][1]
+    test = json.loads((root / "transforms_test.json").read_text())
+    test["frames"][0]["transform_matrix"] = record["transform_matrix"]  # the train view at t = 0.5 again
+    (root / "transforms_test.json").write_text(json.dumps(test))
+    scene = load_scene(root, split="all")
+    assert _names(scene.interpolation) == ["test/r_001"] and scene.max_time == 1.0
+
+
+def test_a_window_that_ends_at_one_leaves_the_time_split_no_future(scene_dir):
+    with pytest.raises(DataError, match=r"empty extrapolation split: no frame with time > max_time=1\.0"):
+        load_scene(scene_dir, max_time=1.0)
+
+
 @pytest.mark.parametrize("split, message", [
     ("future:0.01", r"data\.split: 'future:0\.01' trains on round\(0\.01 x 13\) = 0 of the 13 .* no train frame"),
     ("future:0.99", r"data\.split: 'future:0\.99' trains on round\(0\.99 x 13\) = 13 of the 13 .* no future frame"),
@@ -107,9 +136,9 @@ def test_a_fraction_that_empties_a_side_is_named(scene_dir, split, message):
 
 
 @pytest.mark.parametrize("split", ["futur:0.8", "future:", "future:1.5", "future:1", "future:0", "future:0.0",
-                                   "future:-0.5", "future:8e-1", "Time", 0.8])
+                                   "future:-0.5", "future:8e-1", "Time", "All", 0.8])
 def test_bad_split_values_are_named(scene_dir, split):
-    with pytest.raises(DataError, match=r"^split: expected \"time\" or \"future:F\""):
+    with pytest.raises(DataError, match=r"^split: expected \"time\", \"all\" or \"future:F\""):
         load_scene(scene_dir, split=split)
     with pytest.raises(ValueError, match=r"^--set: data\.split: "):
         load_config(None, [f"data.split={json.dumps(split)}"])
@@ -117,7 +146,7 @@ def test_bad_split_values_are_named(scene_dir, split):
 
 def test_config_accepts_and_records_the_split(tmp_path):
     assert load_config().data.split == "time"
-    for value in ("time", "future:0.8", "future:.75", "future:0.80"):
+    for value in ("time", "all", "future:0.8", "future:.75", "future:0.80"):
         cfg = load_config(None, [f"data.split={value}"])  # a bare word, as `--set` passes it
         assert cfg.data.split == value
         path = tmp_path / "c.toml"
@@ -158,3 +187,27 @@ def test_train_then_eval_under_a_future_split(tmp_path):
     interp = metrics["splits"]["interpolation"]
     assert interp["count"] == 0 and interp["frames"] == [] and interp["mean"]["psnr"] is None
     assert "interpolation (t ≤ 0.875): no frames in this split | 0 | — |" in result.output
+
+
+def test_train_then_eval_under_the_all_split(tmp_path):
+    """D-NeRF's standard protocol: every train frame trains, the held-out views score, no future."""
+    data = make_scene("spin", tmp_path / "mono", resolution=16, n_views=3, n_heldout=1, n_times=9, supersample=1,
+                      n_points=50, layout="monocular")
+    run = tmp_path / "run"
+    tiny = ["data.split=all", "train.iterations=4", "train.warmup=1", "train.curriculum=2", "train.eval_every=2",
+            "train.checkpoint_every=0", "densify.start=1", "densify.every=2", "densify.until=3",
+            "physics.n_points=16", "physics.ramp=2", "train.adf_start=2", "model.hidden=8", "model.depth=1",
+            "model.n_patterns=2", "model.code_dim=2", "train.views=1", "train.threads=1", "model.patterns=mlp"]
+    runner = CliRunner()
+    result = runner.invoke(app, ["train", str(data), "--out", str(run)] + [a for s in tiny for a in ("--set", s)])
+    assert result.exit_code == 0, result.output
+    scene = load_scene(data, split="all")
+    assert f"({len(scene.train)} train frames)" in result.output
+    saved = tomllib.loads((run / "config.toml").read_text())["data"]
+    assert saved["split"] == "all" and saved["max_time"] == scene.max_time == 1.0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["splits"]["interpolation"]["count"] == len(scene.interpolation) > 0
+    assert np.isfinite(metrics["splits"]["interpolation"]["mean"]["psnr"])
+    assert metrics["splits"]["extrapolation"]["count"] == 0 and metrics["freeze_baseline"]["count"] == 0
+    assert 'extrapolation (none: data.split "all" observes the whole clip)' in result.output
+    assert "last observed frame frozen" not in result.output

@@ -139,7 +139,7 @@ def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
         g.opacity_logits[-3:] = -20.0  # three transparent ones, to be pruned
         g.log_scales[:2] = np.log(10.0)  # two large ones among the hot: split, not cloned
         g.log_scales[2:5] = np.log(0.01)  # three small ones: cloned (0.01 < percent_dense * 4)
-    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, after_reset=False,
+    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, image_size=64, after_reset=False,
                             generator=torch.Generator().manual_seed(0), done=cfg.densify.start + 1)
     assert out == {"cloned": 3, "split": 2, "pruned": 3, "total": n - 3 - 2 + 3 + 4}
     assert len(g) == len(model.moving) == out["total"]
@@ -153,6 +153,24 @@ def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
     # Split children are drawn around their parent with scales / 1.6.
     children = g.log_scales[-4:].exp()
     assert torch.allclose(children, torch.full_like(children, 10.0 / 1.6))
+
+
+@pytest.mark.parametrize("image_size, pruned", [(128, 2), (400, 1), (800, 0)])
+def test_screen_size_pruning_is_a_share_of_the_image(tiny_scene, image_size, pruned):
+    # After a reset, radii above 20/128 of the larger side go: 30 px and 100 px on a 128 px
+    # image, 100 px on a 400 px one (62.5 px), neither on an 800 px one (125 px).
+    cfg, model = _model(tiny_scene)
+    opt = make_optimizer(model, cfg.train, extent=4.0)
+    n = len(model.gaussians)
+    stats = DensityStats(n)
+    stats.count[:] = 1.0
+    stats.max_radius[:2] = torch.tensor([30.0, 100.0])
+    with torch.no_grad():
+        model.gaussians.opacity_logits.fill_(0.0)  # opaque: no pruning by opacity
+        model.gaussians.log_scales.fill_(np.log(0.01))  # small in the world
+    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, image_size=image_size, after_reset=True,
+                            generator=torch.Generator().manual_seed(0), done=cfg.densify.start + 1)
+    assert out == {"cloned": 0, "split": 0, "pruned": pruned, "total": n - pruned}
 
 
 @pytest.mark.parametrize("schedule, done_share, room", [("fixed", 0.1, 4), ("linear", 1.0, 4),
@@ -171,7 +189,7 @@ def test_densify_respects_the_gaussian_budget(tiny_scene, schedule, done_share, 
     with torch.no_grad():
         model.gaussians.log_scales.fill_(np.log(0.01))  # all small: candidates for cloning
     hottest = model.gaussians.means[-room:].detach().clone()
-    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, after_reset=False,
+    out = densify_and_prune(model, opt, stats, cfg.densify, extent=4.0, image_size=64, after_reset=False,
                             generator=torch.Generator().manual_seed(0), done=round(100 + 500 * done_share))
     assert out["total"] == n + room and out["cloned"] == room
     assert torch.equal(model.gaussians.means[-room:], hottest)

@@ -32,6 +32,10 @@ Splits (`split`), with `max_time` the end of the observed window:
   `n_train = round(F · n)` of the `n` (Python's `round`, half to even) are `train`, the rest
   `extrapolation`. `max_time` is derived: the last trained frame's time. `interpolation` = val
   frames with `t ≤ max_time` (possibly none). Val frames after it are not used.
+- "all" (D-NeRF's standard protocol: the whole clip observed, nothing to extrapolate): `train` =
+  every train frame; `interpolation` = every val frame, plus the test frames whose (pose, time)
+  is not a train or val frame's; `extrapolation` is empty. `max_time` is derived: the last
+  train frame's time.
 
 The other layouts' loaders (velogauss.data.nerfstudio) share this module's public helpers:
 `prepare_load` (arguments, scene.json), `read_json_object`, `read_pose`, `read_intrinsics`,
@@ -95,8 +99,8 @@ class SceneData:
 
     `train`, `interpolation`, `extrapolation`: lists of `Frame` (see the module docstring
     for how they are split; `interpolation` may be empty under a "future:F" `split`).
-    `max_time`: the observed window's end (derived under "future:F"); `split`: "time" or
-    "future:F". `bounds (2, 3)`: an axis-aligned box `[min, max]` in world
+    `max_time`: the observed window's end (derived under "future:F" and "all"); `split`: "time",
+    "future:F" or "all"; `extrapolation` is empty under "all". `bounds (2, 3)`: an axis-aligned box `[min, max]` in world
     units -- `scene.json`'s `bounds` if present, else the box of the `points3d.ply` points,
     else the box the cameras look at (`camera_focus_bounds`). `background (3,)` float32.
     `points (N, 3)` / `point_colors (N, 3)`: the PLY cloud, or None. `metadata`: the parsed
@@ -129,10 +133,10 @@ class SceneData:
 def load_scene(path, max_time=None, half_res=False, background=None, split="time"):
     """Load and validate a D-NeRF/NVFi scene folder into a `SceneData`.
 
-    `path`: the scene folder. `split`: "time" or "future:F" (module docstring). `max_time`
-    in (0, 1): end of the observed window; None: under "time" scene.json's `max_time` if it
+    `path`: the scene folder. `split`: "time", "future:F" or "all" (module docstring). `max_time`
+    in (0, 1]: end of the observed window; None: under "time" scene.json's `max_time` if it
     records one, else DEFAULT_MAX_TIME (which, given, counts as None, as a config cannot tell
-    it from its default); derived under "future:F", where a number other than DEFAULT_MAX_TIME
+    it from its default); derived under "future:F" and "all", where a number other than DEFAULT_MAX_TIME
     must equal the derived end (a run's config.toml records it; anything else would be two
     windows at once). `half_res`: halve the resolution by 2×2 area averaging of the composited
     images (odd trailing rows/columns cropped; `fx, fy, cx, cy` halved). `background (3,)` in
@@ -168,9 +172,9 @@ def prepare_load(path, max_time, half_res, background, split):
     """Check `load_scene`'s arguments (shared by every layout's loader) and read the optional
     `scene.json`; return `(root, fraction, max_time, background, metadata)`.
 
-    `fraction`: F of a "future:F" split, None for "time". `max_time`: the checked number, with
-    scene.json's own where the caller gave none or DEFAULT_MAX_TIME under "time"; None under
-    "future:F" when none was given. `background`: float32 (3,), scene.json's own where the caller
+    `fraction`: F of a "future:F" split, None for "time" and "all". `max_time`: the checked number,
+    with scene.json's own where the caller gave none or DEFAULT_MAX_TIME under "time"; None under
+    "future:F" and "all" when none was given. `background`: float32 (3,), scene.json's own where the caller
     gave none or DEFAULT_BACKGROUND. `metadata`: the parsed scene.json or None. Raises DataError
     naming the argument, or the missing folder.
     """
@@ -180,7 +184,7 @@ def prepare_load(path, max_time, half_res, background, split):
         raise DataError(root, "path", "scene folder does not exist")
     metadata = _read_metadata(root / "scene.json")
     own = metadata or {}
-    if fraction is None and max_time == DEFAULT_MAX_TIME and "max_time" in own:
+    if split == "time" and max_time == DEFAULT_MAX_TIME and "max_time" in own:
         max_time = own["max_time"]
     if np.array_equal(background, np.float32(DEFAULT_BACKGROUND)) and "background" in own:
         background = own["background"]
@@ -191,7 +195,7 @@ def check_arguments(max_time, half_res, background, split):
     """`(fraction, max_time, background)` of `load_scene`'s arguments, checked before any file is
     read (as `prepare_load` returns them, without scene.json's values); DataError naming the argument."""
     fraction = _check_split(split)
-    if max_time is not None or fraction is None:
+    if max_time is not None or split == "time":
         max_time = _check_max_time(DEFAULT_MAX_TIME if max_time is None else max_time)
     background = _check_background(DEFAULT_BACKGROUND if background is None else background)
     if not isinstance(half_res, (bool, np.bool_)):
@@ -207,6 +211,8 @@ def split_records(root, records, split, fraction, max_time, where):
     (normalised) and `c2w`. `fraction`, `max_time`: as `prepare_load` returns them. `where`:
     {"train", "test": (file, field)} named by the empty-split errors.
     """
+    if split == "all":
+        return _split_all(root, records, split, max_time, where)
     if fraction is not None:
         return _split_future(root, records, split, fraction, max_time)
     return (*_split_time(records, max_time, where), max_time)
@@ -278,6 +284,29 @@ def _split_time(records, max_time, where):
     return train, interpolation, extrapolation
 
 
+def _split_all(root, records, split, max_time, where):
+    """The "all" split's (train, interpolation, [], max_time) records (module docstring); DataError
+    for no train frame, or naming `data.max_time` when a given one disagrees with the derived end."""
+    train = list(records["train"])
+    if not train:
+        raise DataError(*where["train"], "empty train split: no frame")
+    end = max(r["time"] for r in train)
+    _check_window_agrees(root, split, max_time, end, "the last train frame's")
+    interpolation = list(records["val"])
+    seen = {_pose_time_key(r) for r in train + interpolation}
+    interpolation += [r for r in records["test"] if _pose_time_key(r) not in seen]
+    return train, interpolation, [], end
+
+
+def _check_window_agrees(root, split, max_time, end, whose):
+    """DataError naming `data.max_time` when a given one (not None, not DEFAULT_MAX_TIME) differs
+    from the window's end `end` that `split` derives: two windows at once."""
+    if max_time is not None and max_time != DEFAULT_MAX_TIME and not math.isclose(max_time, end, rel_tol=1e-12):
+        raise DataError(root, "data.max_time", f"{max_time!r} disagrees with data.split {split!r}, whose observed "
+                        f"window ends at {whose} t = {end!r}; leave data.max_time at its default "
+                        f"({DEFAULT_MAX_TIME}) under this split")
+
+
 def _split_future(root, records, split, fraction, max_time):
     """The "future:F" split's (train, interpolation, extrapolation) records and the derived
     `max_time` (module docstring); DataError naming `data.split` when F leaves a side empty
@@ -294,10 +323,7 @@ def _split_future(root, records, split, fraction, max_time):
     if not 0.0 < end < 1.0:
         raise DataError(root, "data.split", f"{where}; the last of them is at t = {end:g}, but the observed window "
                         "[0, t] must end inside (0, 1)")
-    if max_time is not None and max_time != DEFAULT_MAX_TIME and not math.isclose(max_time, end, rel_tol=1e-12):
-        raise DataError(root, "data.max_time", f"{max_time!r} disagrees with data.split {split!r}, whose observed "
-                        f"window ends at the last trained frame's t = {end!r}; leave data.max_time at its default "
-                        f"({DEFAULT_MAX_TIME}) under a future split")
+    _check_window_agrees(root, split, max_time, end, "the last trained frame's")
     interpolation = [r for r in records["val"] if r["time"] <= end]
     return pool[:n_train], interpolation, pool[n_train:], end
 
@@ -331,18 +357,17 @@ def camera_focus_bounds(cameras):
 
 def _check_max_time(max_time):
     if isinstance(max_time, bool) or not isinstance(max_time, (int, float, np.integer, np.floating)):
-        raise DataError(None, "max_time", f"expected a number in (0, 1), got {max_time!r}")
-    if not 0.0 < float(max_time) < 1.0:
-        raise DataError(None, "max_time",
-                        f"expected a number in (0, 1) so that train and future frames exist, got {max_time!r}")
+        raise DataError(None, "max_time", f"expected a number in (0, 1], got {max_time!r}")
+    if not 0.0 < float(max_time) <= 1.0:
+        raise DataError(None, "max_time", f"expected a number in (0, 1] (the observed window's end), got {max_time!r}")
     return float(max_time)
 
 
 def _check_split(split):
-    """None for "time", F for "future:F"; DataError naming `split` otherwise."""
+    """None for "time" and "all", F for "future:F"; DataError naming `split` otherwise."""
     match = _FUTURE_SPLIT.fullmatch(split) if isinstance(split, str) else None
-    if split != "time" and match is None:
-        raise DataError(None, "split", f'expected "time" or "future:F" with F a decimal in (0, 1), got {split!r}')
+    if split not in ("time", "all") and match is None:
+        raise DataError(None, "split", f'expected "time", "all" or "future:F" with F a decimal in (0, 1), got {split!r}')
     return None if match is None else float(match.group(1))
 
 

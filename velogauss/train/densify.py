@@ -8,7 +8,9 @@ size, as 3DGS and gsplat measure it). Every `densify.every` iterations in
   scale is at most `percent_dense` of the camera extent (under-reconstruction);
 - split those above that size into two, sampled from the Gaussian, scales / 1.6;
 - prune the Gaussians with opacity below `prune_opacity`, and, after the first opacity
-  reset, those larger than a tenth of the extent in the world or 20 px on screen.
+  reset, those larger than a tenth of the extent in the world or, on screen, with a radius
+  above MAX_SCREEN_RADIUS_SHARE of the image's larger side (3DGS's 20 px at 128 px: a share,
+  so that the same blobs go at any resolution).
 The count never exceeds `max_gaussians` (under `cap_schedule` "linear", its share of it so
 far, `cap_at`): candidates are taken by decreasing gradient.
 Every `opacity_reset_every` iterations opacities are clamped to at most 0.01, so that
@@ -21,13 +23,13 @@ import numpy as np
 import torch
 
 from velogauss.train.optim import update_gaussian_groups
+from velogauss_core.constants import MAX_SCREEN_RADIUS_SHARE
 from velogauss_fast.quaternion import quat_to_rotmat
 
 # 3DGS's split: two children, each scale divided by 0.8 * 2.
 _SPLIT_CHILDREN = 2
 _SPLIT_SCALE_DIVISOR = 1.6
-# 3DGS's limits for pruning oversized Gaussians once opacities have been reset.
-_MAX_SCREEN_RADIUS_PX = 20
+# 3DGS's limit on a Gaussian's size in the world, for pruning once opacities have been reset.
 _MAX_WORLD_SCALE_FRACTION = 0.1
 _RESET_OPACITY = 0.01
 
@@ -59,10 +61,11 @@ class DensityStats:
         self.grad, self.count, self.max_radius = state["grad"], state["count"], state["max_radius"]
 
 
-def densify_and_prune(model, optimizer, stats, cfg, extent, after_reset, generator, done):
+def densify_and_prune(model, optimizer, stats, cfg, extent, image_size, after_reset, generator, done):
     """One round of clone/split/prune (see the module docstring); resets `stats`.
 
-    cfg: `DensifyConfig`; extent: camera extent (world units); after_reset: an opacity reset
+    cfg: `DensifyConfig`; extent: camera extent (world units); image_size: the training
+    images' larger side in pixels (the screen-size pruning's scale); after_reset: an opacity reset
     has happened (enables the size pruning); generator: torch.Generator for the split samples;
     done: the iterations done (the cap's share under cfg.cap_schedule "linear", `cap_at`).
     Returns {"cloned", "split", "pruned", "total"}.
@@ -81,7 +84,7 @@ def densify_and_prune(model, optimizer, stats, cfg, extent, after_reset, generat
 
         prune = g.opacities < cfg.prune_opacity
         if after_reset:
-            prune |= (stats.max_radius > _MAX_SCREEN_RADIUS_PX) | (max_scale > _MAX_WORLD_SCALE_FRACTION * extent)
+            prune |= (stats.max_radius > MAX_SCREEN_RADIUS_SHARE * image_size) | (max_scale > _MAX_WORLD_SCALE_FRACTION * extent)
         tensors = g.tensors()
         cloned = {name: t[clone] for name, t in tensors.items()}
         children = _split_children(g, split, generator)

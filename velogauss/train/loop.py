@@ -356,7 +356,8 @@ class Trainer:
         due after `done` iterations (the ADF as the next iteration will run it)."""
         d, model = self.cfg.densify, self.model
         if d.start < done <= d.until and done % d.every == 0:
-            densify_and_prune(model, self.optimizer, self.stats, d, self.extent, self.state.after_reset,
+            densify_and_prune(model, self.optimizer, self.stats, d, self.extent,
+                              max(self.data.width, self.data.height), self.state.after_reset,
                               torch_generator(self.rng), done)
         # A reset with less than one reset period left would end the run on faded Gaussians,
         # so it is skipped, as 3DGS resets only long before its end.
