@@ -161,6 +161,23 @@ def test_load_bench_refuses_unknown_settings(tmp_path):
         load.run(str(tmp_path / "R.md"), device="cuda")
 
 
+def test_step_profile_at_real_resolution_quick(tmp_path):
+    from velogauss.bench import step_profile
+
+    out = tmp_path / "RESULTS.md"
+    bench("step_profile", "--quick", "--sizes", "24,32", "--gaussians", "150", "--out", out)
+    body = section(out.read_text(), "Training step profile at real resolution")
+    assert "Regenerate: `velogauss bench step_profile --sizes 24,32 --gaussians 150 --quick`" in body
+    header, rows = table(body)
+    assert header == ["part", "24 px, 150 points", "32 px, 150 points"]
+    assert [row[0].replace("&nbsp;", "") for row in rows] == (
+        ["iteration, unprofiled (ms)", "Gaussians trained"] + [label for label, _, _ in step_profile.PARTS])
+    assert rows[1][1:] == ["150", "150"]  # the point cloud's size is the trained count
+    assert all(cell.endswith("(100%)") for cell in rows[2][1:])  # the step's row is the whole step
+    with pytest.raises(ValueError, match="--sizes, --gaussians: give both"):
+        step_profile.run(str(out), sizes=[400])
+
+
 def test_step_profile_quick(tmp_path):
     from velogauss.bench import step_profile
 

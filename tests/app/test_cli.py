@@ -111,6 +111,10 @@ def test_bench_unknown_benchmark():
 def test_bench_bad_list_names_the_option(tmp_path):
     assert_refused(invoke("bench", "load", "--settings", "fast", "--out", tmp_path / "R.md"), "settings", "fast")
     assert_refused(invoke("bench", "raster", "--workloads", ",", "--out", tmp_path / "R.md"), "--workloads")
+    assert_refused(invoke("bench", "step_profile", "--sizes", "400,8OO", "--gaussians", "20000", "--out",
+                          tmp_path / "R.md"), "--sizes", "8OO")
+    assert_refused(invoke("bench", "step_profile", "--sizes", "400", "--gaussians", "8", "--out", tmp_path / "R.md"),
+                   "--gaussians", "[8]")
     assert not (tmp_path / "R.md").exists()
 
 

@@ -39,6 +39,14 @@ def _names(text, what):
     return names
 
 
+def _whole_numbers(text, what):
+    """The comma-separated whole numbers of `text`; ValueError naming `what` otherwise."""
+    names = _names(text, what)
+    if not all(name.isdigit() for name in names):
+        raise ValueError(f"{what}: expected comma-separated whole numbers, got {text!r}")
+    return [int(name) for name in names]
+
+
 def _done(out):
     typer.echo(f"results: {out}")
 
@@ -173,7 +181,12 @@ def load_command(
 
 @bench_app.command("step_profile")
 def step_profile_command(
-    iterations: Optional[int] = typer.Option(None, help="Profiled iterations (default: 40; 3 with --quick)."),
+    iterations: Optional[int] = typer.Option(
+        None, help="Profiled iterations (default: 40; 3 with --quick; 3 per configuration with --sizes)."),
+    sizes: Optional[str] = typer.Option(
+        None, metavar="PX,...", help="Profile at real resolution instead: image sizes, e.g. 400,800 (with --gaussians)."),
+    gaussians: Optional[str] = typer.Option(
+        None, metavar="N,...", help="The real-resolution grid's initial Gaussians, e.g. 20000,200000 (with --sizes)."),
     quick: bool = _QUICK,
     device: str = _CPU_ONLY,
     out: Path = _OUT,
@@ -181,7 +194,11 @@ def step_profile_command(
     """Training step profile: where an iteration's time goes, by cProfile (velogauss.bench.step_profile)."""
     from velogauss.bench import step_profile
 
-    _record(step_profile.run, out, device, iterations=iterations, quick=quick)
+    with user_errors():
+        step_profile.run(str(out), device, iterations=iterations, quick=quick,
+                         sizes=None if sizes is None else _whole_numbers(sizes, "--sizes"),
+                         gaussians=None if gaussians is None else _whole_numbers(gaussians, "--gaussians"))
+    _done(out)
 
 
 @bench_app.command("step_ratio")

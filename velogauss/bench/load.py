@@ -216,12 +216,15 @@ def _measure(setting, condition, workloads, seconds, scene_dir, quick):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def make_default_scene(out_dir, quick=False, n_points=None):
+def make_default_scene(out_dir, quick=False, n_points=None, resolution=None):
     """The default synthetic scene (make-scene's defaults; 16 px, 4 views, 5 times when quick),
-    its point cloud `n_points` large when given."""
+    its point cloud `n_points` large when given; at `resolution` px when given, with 5 views
+    (3 trained) at 6 times and one ray per pixel, so that an 800 px scene renders in seconds."""
     from velogauss.scenes import DEFAULT_SCENE, make_scene
 
     options = dict(resolution=16, n_views=4, n_times=5, n_points=200) if quick else {}
+    if resolution:
+        options.update(resolution=resolution, n_views=5, n_times=6, supersample=1)
     if n_points:
         options["n_points"] = n_points
     return make_scene(DEFAULT_SCENE, out_dir, **options)

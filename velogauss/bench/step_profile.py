@@ -10,7 +10,13 @@ losses (velogauss.train.aux_losses) run inline in the profiled iterations, as on
 iteration times are reported unprofiled with them beside the renders (the default), unprofiled
 inline, and profiled. cProfile's own cost inflates Python-heavy parts.
 
+With `--sizes` and `--gaussians` it profiles the same step at real resolution instead
+(`run_grid`): the default scene rendered at each size (5 cameras, 3 trained, 6 times, one ray
+per pixel) with a point cloud of each count, so that the training starts from that many
+Gaussians; a column per (size, count), in a section of its own.
+
 Regenerate: velogauss bench step_profile
+At real resolution: velogauss bench step_profile --sizes 400,800 --gaussians 20000,200000
 Smoke test: velogauss bench step_profile --quick --out /tmp/bench.md
 """
 
@@ -20,10 +26,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from tqdm import tqdm
+
 SECTION = "## Training step profile"
+GRID_SECTION = "## Training step profile at real resolution"
 COMMAND = "velogauss bench step_profile"
 ITERATIONS = 40  # below the 100 between densifications: no densification in the window
 QUICK_ITERATIONS = 3
+GRID_ITERATIONS = 3  # an 800 px step with 200k Gaussians takes seconds; the parts' shares settle in a few
 # (label, indent, [(path suffix, function name), ...]): the functions whose cumulative time
 # make up the row (summed; none of a row's functions calls another of the same row).
 PARTS = [
@@ -72,12 +82,14 @@ def _cumulative(stats, suffix, name):
     return total, calls
 
 
-def measure(iterations, quick=False):
-    """{"unprofiled_s", "inline_s" (side losses inline), "profiled_s" (inline too), "rows": [(label, indent, s per iteration, calls per iteration)], "gaussians"}."""
+def measure(iterations, quick=False, resolution=None, n_points=None):
+    """{"unprofiled_s", "inline_s" (side losses inline), "profiled_s" (inline too), "rows": [(label, indent,
+    s per iteration, calls per iteration)], "gaussians"}: on the default scene, at `resolution` px and
+    from `n_points` initial points when given (`velogauss.bench.load.make_default_scene`)."""
     from velogauss.bench.load import make_default_scene, training_loop
 
     with tempfile.TemporaryDirectory(prefix="velogauss-profile-") as tmp:
-        scene = make_default_scene(Path(tmp) / "scene", quick)
+        scene = make_default_scene(Path(tmp) / "scene", quick, n_points=n_points, resolution=resolution)
         loop, first = training_loop(scene, 0)
         iteration = iter(range(first, first + 2 + 3 * iterations))
 
@@ -107,12 +119,17 @@ def measure(iterations, quick=False):
             "gaussians": len(loop.model.gaussians)}
 
 
-def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=False):
+def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=False, sizes=None, gaussians=None):
     """Profile `iterations` training iterations (default ITERATIONS, QUICK_ITERATIONS when quick)
-    and write the "## Training step profile" section."""
-    iterations = iterations or (QUICK_ITERATIONS if quick else ITERATIONS)
+    and write the "## Training step profile" section; given `sizes` and `gaussians` (lists of
+    image sizes in px and of initial Gaussian counts, both or neither), `run_grid` instead."""
     if device != "cpu":
         raise ValueError(f"--device: the step profile runs on the CPU; expected cpu, got {device!r}")
+    if bool(sizes) != bool(gaussians):
+        raise ValueError("--sizes, --gaussians: give both (the grid's image sizes and Gaussian counts) or neither")
+    if sizes:
+        return run_grid(out_path, sizes, gaussians, iterations or (1 if quick else GRID_ITERATIONS), quick)
+    iterations = iterations or (QUICK_ITERATIONS if quick else ITERATIONS)
     from velogauss.bench.harness import regenerate_command, write_table_section
 
     result = measure(iterations, quick)
@@ -132,3 +149,38 @@ def run(out_path="benchmarks/RESULTS.md", device="cpu", iterations=None, quick=F
         "profiled (inline: cProfile sees one thread; its cost inflates Python-heavy rows).",
     ], regenerate_command(COMMAND, *options, quick=quick), lines)
     return result
+
+
+def run_grid(out_path, sizes, gaussians, iterations, quick=False):
+    """Profile the step at each (size in px, initial Gaussians) of `sizes` x `gaussians` and write
+    the "## Training step profile at real resolution" section: a column per configuration, each
+    part's ms per iteration and share of the profiled step. Returns {(size, count): `measure`'s}."""
+    from velogauss.bench.harness import regenerate_command, write_table_section
+
+    for name, values in (("--sizes", sizes), ("--gaussians", gaussians)):
+        if any(isinstance(v, bool) or not isinstance(v, int) or v < 16 for v in values):
+            raise ValueError(f"{name}: expected whole numbers of at least 16, got {list(values)}")
+    grid = [(size, count) for size in sizes for count in gaussians]
+    results = {key: measure(iterations, quick, resolution=key[0], n_points=key[1])
+               for key in tqdm(grid, desc="profile")}
+    lines = ["| part | " + " | ".join(f"{size} px, {count:,} points" for size, count in grid) + " |",
+             "|---|" + "---:|" * len(grid),
+             "| iteration, unprofiled (ms) | " + " | ".join(f"{1e3 * results[k]['unprofiled_s']:.0f}" for k in grid)
+             + " |",
+             "| Gaussians trained | " + " | ".join(f"{results[k]['gaussians']:,}" for k in grid) + " |"]
+    for index, (label, indent, _) in enumerate(PARTS):
+        cells = [f"{1e3 * results[k]['rows'][index][2]:.0f} ({100 * results[k]['rows'][index][2] / results[k]['rows'][0][2]:.0f}%)"
+                 for k in grid]
+        lines.append(f"| {'&nbsp;&nbsp;' * indent}{label} | " + " | ".join(cells) + " |")
+    options = [f"--sizes {','.join(map(str, sizes))}", f"--gaussians {','.join(map(str, gaussians))}"]
+    if iterations != (1 if quick else GRID_ITERATIONS):
+        options.append(f"--iterations {iterations}")
+    write_table_section(out_path, GRID_SECTION, [
+        "cProfile over the default training's step at real resolution: the default scene rendered at each size "
+        "(5 cameras, 3 trained, 6 times, one ray per pixel) with a point cloud of each count, trained from that "
+        f"many Gaussians (motion, ADF and full physics loss on; velogauss's default threads), {iterations} "
+        "profiled iterations each after one to warm up. Cells: ms per iteration and the share of the profiled "
+        "step; indented rows are parts of the row above, as in \"Training step profile\". The box fills a "
+        "small part of the view, so these Gaussians cover fewer pixels than a real capture's.",
+    ], regenerate_command(COMMAND, *options, quick=quick), lines)
+    return results
