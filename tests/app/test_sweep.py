@@ -292,6 +292,16 @@ def test_the_readme_grid_is_the_ten_default_runs(tmp_path):
     assert sweep.threads == 1 and sweep.scene_options == {}
 
 
+@pytest.mark.parametrize("name, split", [("dnerf_future", "future:0.8"), ("dnerf_standard", "all")])
+def test_the_dnerf_grids_train_the_eight_scenes_at_400_px(tmp_path, name, split):
+    sweep = load_grid(ROOT / "benchmarks" / "grids" / f"{name}.toml")
+    scenes = ("bouncingballs", "hellwarrior", "hook", "jumpingjacks", "lego", "mutant", "standup", "trex")
+    assert {p.name for p in sweep.points} == {f"{s}-{a}-s0" for s in scenes for a in ("full", "deform-only")}
+    cfg = point_config(sweep.points[0], sweep.config, tmp_path)
+    assert cfg.data.split == split and cfg.data.half_res and cfg.data.background == (0.0, 0.0, 0.0)
+    assert cfg.train == load_config().train and cfg.model == load_config().model  # the defaults otherwise
+
+
 def test_sweep_help():
     result = CliRunner().invoke(app, ["sweep", "--help"])
     assert result.exit_code == 0 and "--address" in result.output
