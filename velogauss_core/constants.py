@@ -143,10 +143,11 @@ MIXING_INIT_LR = 1e-2
 # start, which would stretch the hull; relative, so a run whose warm-up is too short to make
 # anything opaque still gets a centre.
 RIGID_HULL_OPACITY = 0.5
-# Density control: after an opacity reset, a Gaussian whose screen radius has exceeded this share
-# of the image's larger side is pruned. 3DGS's 20 px at the 128 px the schedule was tuned on; as
-# a share it prunes the same blobs at any size, where 20 px at 400 px cut 5,000 of a 6,400-Gaussian
-# reconstruction in one round, every round (benchmarks/RESULTS.md, "Density control at 400 px").
+# Density control: after an opacity reset, a Gaussian whose screen radius has exceeded the larger of
+# these is pruned: 3DGS's 20 px, or this share of the image's larger side (20 px at 128 px). A fixed
+# 20 px at 400 px cut 5,000 of a 6,400-Gaussian reconstruction each round; the share alone (10 px)
+# cost two 64 px scenes 0.9 and 1.4 dB inside the window (benchmarks/RESULTS.md, "Density control").
+MAX_SCREEN_RADIUS_PX = 20
 MAX_SCREEN_RADIUS_SHARE = 20 / 128
 # VG-FIELD-GAUSS: a point off the Gaussians takes the mixing weights of its nearest Gaussians,
 # weighted by inverse distance to this power (Shepard's interpolation; 2 is Shepard's own

@@ -155,16 +155,17 @@ def test_densify_carries_adam_moments_with_the_gaussians(tiny_scene, device):
     assert torch.allclose(children, torch.full_like(children, 10.0 / 1.6))
 
 
-@pytest.mark.parametrize("image_size, pruned", [(128, 2), (400, 1), (800, 0)])
-def test_screen_size_pruning_is_a_share_of_the_image(tiny_scene, image_size, pruned):
-    # After a reset, radii above 20/128 of the larger side go: 30 px and 100 px on a 128 px
-    # image, 100 px on a 400 px one (62.5 px), neither on an 800 px one (125 px).
+@pytest.mark.parametrize("image_size, pruned", [(64, 2), (128, 2), (400, 1), (800, 0)])
+def test_screen_size_pruning_grows_with_the_image_past_128_px(tiny_scene, image_size, pruned):
+    # After a reset, radii above max(20 px, 20/128 of the larger side) go: 30 px and 100 px on a
+    # 64 or 128 px image (15 px stays: 3DGS's 20 px is the floor), 100 px on a 400 px one (62.5
+    # px), none on an 800 px one (125 px).
     cfg, model = _model(tiny_scene)
     opt = make_optimizer(model, cfg.train, extent=4.0)
     n = len(model.gaussians)
     stats = DensityStats(n)
     stats.count[:] = 1.0
-    stats.max_radius[:2] = torch.tensor([30.0, 100.0])
+    stats.max_radius[:3] = torch.tensor([15.0, 30.0, 100.0])
     with torch.no_grad():
         model.gaussians.opacity_logits.fill_(0.0)  # opaque: no pruning by opacity
         model.gaussians.log_scales.fill_(np.log(0.01))  # small in the world

@@ -9,8 +9,7 @@ size, as 3DGS and gsplat measure it). Every `densify.every` iterations in
 - split those above that size into two, sampled from the Gaussian, scales / 1.6;
 - prune the Gaussians with opacity below `prune_opacity`, and, after the first opacity
   reset, those larger than a tenth of the extent in the world or, on screen, with a radius
-  above MAX_SCREEN_RADIUS_SHARE of the image's larger side (3DGS's 20 px at 128 px: a share,
-  so that the same blobs go at any resolution).
+  above `screen_radius_limit` (3DGS's 20 px, growing with the image past 128 px).
 The count never exceeds `max_gaussians` (under `cap_schedule` "linear", its share of it so
 far, `cap_at`): candidates are taken by decreasing gradient.
 Every `opacity_reset_every` iterations opacities are clamped to at most 0.01, so that
@@ -23,7 +22,7 @@ import numpy as np
 import torch
 
 from velogauss.train.optim import update_gaussian_groups
-from velogauss_core.constants import MAX_SCREEN_RADIUS_SHARE
+from velogauss_core.constants import MAX_SCREEN_RADIUS_PX, MAX_SCREEN_RADIUS_SHARE
 from velogauss_fast.quaternion import quat_to_rotmat
 
 # 3DGS's split: two children, each scale divided by 0.8 * 2.
@@ -84,7 +83,7 @@ def densify_and_prune(model, optimizer, stats, cfg, extent, image_size, after_re
 
         prune = g.opacities < cfg.prune_opacity
         if after_reset:
-            prune |= (stats.max_radius > MAX_SCREEN_RADIUS_SHARE * image_size) | (max_scale > _MAX_WORLD_SCALE_FRACTION * extent)
+            prune |= (stats.max_radius > screen_radius_limit(image_size)) | (max_scale > _MAX_WORLD_SCALE_FRACTION * extent)
         tensors = g.tensors()
         cloned = {name: t[clone] for name, t in tensors.items()}
         children = _split_children(g, split, generator)
@@ -98,6 +97,13 @@ def densify_and_prune(model, optimizer, stats, cfg, extent, image_size, after_re
         stats.reset(len(g), device=stats.grad.device)
     return {"cloned": int(clone.sum()), "split": int(split.sum()), "pruned": int((prune & ~split).sum()),
             "total": len(g)}
+
+
+def screen_radius_limit(image_size):
+    """The screen radius (px) past which a Gaussian is pruned after an opacity reset, for images
+    whose larger side is `image_size` px: max(MAX_SCREEN_RADIUS_PX, MAX_SCREEN_RADIUS_SHARE x
+    image_size), 3DGS's 20 px up to 128 px and a share of the image above (spec/density.md)."""
+    return max(MAX_SCREEN_RADIUS_PX, MAX_SCREEN_RADIUS_SHARE * image_size)
 
 
 def cap_at(cfg, done):
