@@ -283,3 +283,27 @@ def test_step_ratio_needs_a_revision_and_refuses_a_size_below_one():
     assert result.exit_code == 2 and "--before" in result.output, result.output
     result = runner.invoke(app, ["bench", "step_ratio", "--before", BEFORE, "--gaussians", "0"])
     assert result.exit_code == 2 and "--gaussians" in result.output, result.output
+
+
+def test_gpu_step_quick_on_the_cpu(tmp_path):
+    # Without CUDA the static step is not timed, and the table says so; the dynamic step is.
+    out = tmp_path / "RESULTS.md"
+    bench("gpu_step", "--quick", "--device", "cpu", "--out", out)
+    body = section(out.read_text(), "The dynamic step against gsplat's static step")
+    assert "Regenerate: `velogauss bench gpu_step --device cpu --quick`" in body
+    header, rows = table(body)
+    assert header[:2] == ["size", "Gaussians"] and len(rows) == 1
+    size, count, views, dynamic, static, ratio = rows[0]
+    assert (size, count, views) == ("24 px", "200", "3") and float(dynamic) > 0
+    assert (static, ratio) == ("gsplat not available", "—")
+
+
+def test_gpu_step_refuses_a_missing_device_and_bad_sizes(tmp_path):
+    from velogauss.bench import gpu_step
+
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="--device: device 'cuda' is not available"):
+            gpu_step.run(str(tmp_path / "R.md"))
+    with pytest.raises(ValueError, match="--size: expected a whole number of at least 16, got 8"):
+        gpu_step.run(str(tmp_path / "R.md"), device="cpu", size=8)
+    assert not (tmp_path / "R.md").exists()

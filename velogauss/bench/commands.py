@@ -201,6 +201,22 @@ def step_profile_command(
     _done(out)
 
 
+@bench_app.command("gpu_step")
+def gpu_step_command(
+    size: Optional[int] = typer.Option(None, help="Image size in px (default: 800; 24 with --quick)."),
+    gaussians: Optional[int] = typer.Option(None, help="Initial Gaussians (default: 100000; 200 with --quick)."),
+    iterations: Optional[int] = typer.Option(None, help="Timed steps of each kind (default: 10; 2 with --quick)."),
+    quick: bool = _QUICK,
+    device: str = typer.Option("cuda", help="Torch device (gsplat's static step needs CUDA)."),
+    out: Path = _OUT,
+):
+    """The dynamic training step against gsplat's static 3DGS step at the same size
+    (velogauss.bench.gpu_step)."""
+    from velogauss.bench import gpu_step
+
+    _record(gpu_step.run, out, device, size=size, gaussians=gaussians, iterations=iterations, quick=quick)
+
+
 @bench_app.command("step_ratio")
 def step_ratio_command(
     before: str = typer.Option(..., "--before", metavar="REVISION", help="Git revision of the 'before' tree."),

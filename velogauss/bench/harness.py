@@ -86,10 +86,10 @@ def regenerate_command(command, *options, quick=False, device="cpu", threads=0):
     return " ".join(parts + ([f"--threads {threads}"] if threads else []))
 
 
-def write_table_section(out_path, section, paragraphs, regenerate, table_lines):
+def write_table_section(out_path, section, paragraphs, regenerate, table_lines, device="cpu"):
     """`write_section` in the layout the step benchmarks share: the section heading, the
-    `paragraphs`, the machine, the `regenerate` command line, then the table's lines."""
-    text = "\n\n".join([section, *paragraphs, f"Machine: {machine()}.", f"Regenerate: `{regenerate}`",
+    `paragraphs`, the machine (with `device`'s GPU), the `regenerate` command line, then the table's lines."""
+    text = "\n\n".join([section, *paragraphs, f"Machine: {machine(device)}.", f"Regenerate: `{regenerate}`",
                          "\n".join(table_lines)])
     write_section(out_path, section, text)
 
