@@ -312,7 +312,7 @@ def test_broken_point_cloud_and_scene_json(tmp_path):
 
 @pytest.mark.parametrize(
     "kwargs, name",
-    [({"max_time": 1.0}, "max_time"), ({"max_time": 0.0}, "max_time"), ({"max_time": float("nan")}, "max_time"),
+    [({"max_time": 1.5}, "max_time"), ({"max_time": 0.0}, "max_time"), ({"max_time": float("nan")}, "max_time"),
      ({"max_time": "0.5"}, "max_time"), ({"background": (1.0, 1.0)}, "background"),
      ({"background": (0.0, 2.0, 0.0)}, "background"), ({"half_res": "yes"}, "half_res")],
 )
