@@ -19,14 +19,7 @@ out=${1:?usage: gpu_bench.sh OUT_DIR [SECONDS] [DNERF_SCENE]}
 budget=${2:-450}
 scene=${3:-benchmarks/grids/dnerf/lego}
 start=$(date +%s)
-left() { echo $(( budget - ($(date +%s) - start) )); }
-mkdir -p "$out"
-export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
-export TORCH_CUDA_ARCH_LIST=${TORCH_CUDA_ARCH_LIST:-$(python3 -c 'import torch; print("%d.%d" % torch.cuda.get_device_capability())' 2>/dev/null)}
-
-{ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv
-  python3 -c 'import sys, torch; print("python", sys.version.split()[0], "torch", torch.__version__, "cuda", torch.version.cuda, torch.cuda.get_device_name(0))'
-  nproc; } >"$out/env.txt" 2>&1
+source "$(dirname "$0")/gpu_env.sh"
 
 # The default scene's step needs no gsplat (the torch backend): it runs while gsplat compiles.
 if [ -n "${GSPLAT_PATH:-}" ]; then

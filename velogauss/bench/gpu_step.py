@@ -16,11 +16,11 @@ Smoke test: velogauss bench gpu_step --quick --out /tmp/bench.md
 """
 
 import tempfile
-import time
 from pathlib import Path
 
 import torch
 
+from velogauss.bench.harness import regenerate_command, timed_passes, write_table_section
 from velogauss_fast.backends import gsplat_available
 
 SECTION = "## The dynamic step against gsplat's static step"
@@ -34,26 +34,13 @@ ITERATIONS, QUICK_ITERATIONS = 10, 2
 def _seconds(device, step, count):
     """Mean wall seconds of `count` calls of `step`, the device synchronised around each."""
     sync = torch.cuda.synchronize if torch.device(device).type == "cuda" else (lambda: None)
-    total = 0.0
-    for _ in range(count):
-        sync()
-        t0 = time.perf_counter()
+
+    def synced():
         step()
         sync()
-        total += time.perf_counter() - t0
-    return total / count
 
-
-def dynamic_step(loop, first):
-    """A function running the `Trainer` `loop`'s next iteration from `first` (step, density control)."""
-    counter = {"it": first}
-
-    def step():
-        loop.step(counter["it"])
-        counter["it"] += 1
-        loop.adapt_gaussians(counter["it"])
-
-    return step
+    sync()
+    return sum(timed_passes(synced, count)) / count
 
 
 def static_step(loop):
@@ -84,13 +71,13 @@ def static_step(loop):
 
 def measure(size, gaussians, device, iterations, quick=False):
     """{"dynamic_s", "static_s" (None without gsplat), "gaussians", "views"}: mean seconds per step."""
-    from velogauss.bench.load import make_default_scene, training_loop
+    from velogauss.bench.load import make_default_scene, next_iterations, training_loop
 
     with tempfile.TemporaryDirectory(prefix="velogauss-gpu-step-") as tmp:
         scene = make_default_scene(Path(tmp) / "scene", quick, n_points=gaussians, resolution=size)
         loop, first = training_loop(scene, 0, device=device)
         static = static_step(loop) if gsplat_available(device) else None
-        dynamic = dynamic_step(loop, first)
+        dynamic = next_iterations(loop, first)
         _seconds(device, dynamic, WARMUP)
         result = {"dynamic_s": _seconds(device, dynamic, iterations), "gaussians": len(loop.model.gaussians),
                   "views": loop.cfg.train.views, "static_s": None}
@@ -102,7 +89,6 @@ def measure(size, gaussians, device, iterations, quick=False):
 
 def run(out_path="benchmarks/RESULTS.md", device="cuda", size=None, gaussians=None, iterations=None, quick=False):
     """Time both steps and write the "## The dynamic step against gsplat's static step" section."""
-    from velogauss.bench.harness import regenerate_command, write_table_section
     from velogauss.run import check_device
 
     check_device(device)

@@ -101,6 +101,12 @@ def training_pass(scene_dir, threads):
     """A function running one training iteration of the default config on `scene_dir`, and
     the number of Gaussians it trains."""
     loop, first = training_loop(scene_dir, threads)
+    return next_iterations(loop, first), len(loop.model.gaussians)
+
+
+def next_iterations(loop, first):
+    """A function running the `Trainer` `loop`'s next iteration from `first` on, each call one:
+    its step, then its density control."""
     counter = {"it": first}
 
     def one_pass():
@@ -108,7 +114,7 @@ def training_pass(scene_dir, threads):
         counter["it"] += 1
         loop.adapt_gaussians(counter["it"])
 
-    return one_pass, len(loop.model.gaussians)
+    return one_pass
 
 
 def _render_pass(backend, quick):
