@@ -87,6 +87,9 @@ class DataConfig:
     """Load the images at half resolution (quick looks)"""
     background: tuple[Unit, Unit, Unit] = (1.0, 1.0, 1.0)
     """RGB behind the Gaussians and under RGBA images (white)"""
+    heldout_cameras: Union[Literal["auto"], Annotated[tuple[_int(ge=0), ...], Field(min_length=1)]] = "auto"
+    """Cameras whose frames never train and score as interpolation: "auto", the layout's own held-out split;
+    or camera ids, Panoptic `cam_id`s or nerfstudio camera numbers, for a capture without one (spec/data.md)"""
 
 
 @dataclass(frozen=True, config=_STRICT)
@@ -107,6 +110,10 @@ class _ModelChoices:
     """The motion patterns' time form: "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or
     "auto": the form that best predicts the held-out end of the window from a short probe's Gaussian paths
     (velogauss.train.backtest); config.toml records the choice."""
+    future: Literal["auto", "integrate", "hold"] = "auto"
+    """Past the observed window: "integrate" carries the motion on; "hold" keeps every Gaussian where it is at the
+    window's end (the persistence forecast); "auto": "hold" when the backtest of `patterns = "auto"` found no form
+    that predicts the held-out end of the window better than freezing it, else "integrate" (spec/motion.md)."""
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     """How the mixing weights start: "uniform", "clusters" (one k-means region per pattern,
     velogauss.train.mixing) or "auto": clusters when the backtest's probe found still Gaussians beside
@@ -325,7 +332,7 @@ def resolve_transport(cfg, pattern_form, saved=None):
 
 # The model keys whose "auto" a new run resolves from its data before training (the backtest,
 # velogauss.train.backtest); config.toml records the values chosen.
-CHOSEN_KEYS = ("patterns", "effects", "mixing_init")
+CHOSEN_KEYS = ("patterns", "effects", "mixing_init", "future")
 
 
 def resolve_from_run(cfg, saved):

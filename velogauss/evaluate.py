@@ -154,6 +154,20 @@ def freeze_baseline(model, frames, background, max_time, progress=False):
     return {"time": float(max_time), "count": len(rows), "mean": mean_metrics(rows), "frames": rows}
 
 
+def background_baseline(frames, background):
+    """PSNR and SSIM of `frames` against an empty render: every pixel the background colour (3,).
+
+    What a model that shows nothing would score: on masked captures, where the subject covers a
+    few per cent of the image, an empty frame alone scores well, and a split's PSNR means
+    something only above it. Returns `{"count", "mean": {"psnr", "ssim"}, "frames": [...]}`.
+    """
+    rows = []
+    for f in frames:
+        empty = np.broadcast_to(np.asarray(background, dtype=np.float32), f.image.shape)
+        rows.append({"path": str(f.path), "time": float(f.time), **frame_metrics(empty, f.image, with_lpips=False)})
+    return {"count": len(rows), "mean": mean_metrics(rows), "frames": rows}
+
+
 def moving_surface_points(scene, n_points=MOTION_EVAL_POINTS, seed=MOTION_EVAL_SEED):
     """Points `(M, 3)` on the surfaces of the moving bodies of `scene` (an `AnalyticScene`) at t = 0.
 
@@ -233,7 +247,8 @@ def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth
     weights came from, or why LPIPS was skipped: `lpips_status`), `splits` (per split, see
     `evaluate_split`; an empty one, as interpolation may be under "future:F", has count 0 and
     None means: absent, not an error),
-    `freeze_baseline` (or None), `motion` (`velocity`, `trajectory`, or None).
+    `freeze_baseline` (or None), `background_baseline` (per split, `background_baseline`: an empty
+    render's scores), `motion` (`velocity`, `trajectory`, or None).
     Raises ValueError naming `splits` for an unknown split.
     """
     unknown = [s for s in splits if s not in SPLITS]
@@ -243,11 +258,12 @@ def evaluate_model(model, scene, splits=SPLITS, lpips_weights=None, ground_truth
     if not with_lpips:
         tqdm.write(f"LPIPS {note}")
     result = {"max_time": float(scene.max_time), "split": scene.split, "lpips": note, "splits": {},
-              "freeze_baseline": None, "motion": None}
+              "freeze_baseline": None, "background_baseline": {}, "motion": None}
     for name in splits:
         frames = getattr(scene, name)
         result["splits"][name] = evaluate_split(model, frames, scene.background, lpips_weights, progress, name,
                                                 with_lpips)
+        result["background_baseline"][name] = background_baseline(frames, scene.background)
     if "extrapolation" in splits:
         result["freeze_baseline"] = freeze_baseline(model, scene.extrapolation, scene.background, scene.max_time,
                                                     progress)
@@ -275,6 +291,10 @@ def summary_markdown(result):
         base = result["freeze_baseline"]
         lines.append(_metric_row(f"extrapolation, baseline: last observed frame frozen (t = {t:g})",
                                  base["count"], base["mean"]))
+    for name, base in (result.get("background_baseline") or {}).items():
+        if base["count"]:
+            lines.append(_metric_row(f"{name}, baseline: an empty render (the background alone)", base["count"],
+                                     base["mean"]))
     motion = result["motion"]
     if motion is not None:
         vel, traj = motion["velocity"], motion["trajectory"]
@@ -317,7 +337,9 @@ _DEFINITIONS = f"""
 PSNR (dB, capped at 100), SSIM (11×11 Gaussian window, σ = 1.5) and LPIPS v0.1 as in
 spec/losses_metrics.md, each the mean over the split's frames; predictions are clipped to
 [0, 1]. The baseline row renders every future frame's camera at the last observed time and
-holds it still: the difference to the extrapolation row is what the learned motion buys.
+holds it still: the difference to the extrapolation row is what the learned motion buys. The
+empty-render rows score the background colour alone against each split: a model that shows
+nothing scores that, so a split's PSNR says something only above it.
 Velocity: points sampled on the moving bodies' surfaces at t = 0 and carried along their
 true paths; at {len(MOTION_EVAL_TIMES)} evenly spaced times in [0, 1], ‖v_learned − v_true‖ / ‖v_true‖ over all points
 (a zero prediction scores 1), and the mean per-point error |v_learned − v_true|. The particle

@@ -185,7 +185,8 @@ def load_run_scene(cfg, data_dir):
     from velogauss.data import check_trainable_size, load_scene
 
     scene = load_scene(data_dir, max_time=cfg.data.max_time, half_res=cfg.data.half_res,
-                       background=cfg.data.background, split=cfg.data.split, format=cfg.data.format)
+                       background=cfg.data.background, split=cfg.data.split, format=cfg.data.format,
+                       heldout_cameras=cfg.data.heldout_cameras)
     check_trainable_size(scene)
     return scene
 

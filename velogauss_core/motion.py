@@ -78,6 +78,10 @@ PatternForm = Literal["mlp", "rigid", "harmonic"]
 PATTERN_FORMS: tuple[str, ...] = get_args(PatternForm)
 
 QueryCode = Literal["gaussians", "network"]
+# Past the observed window the motion carries on ("integrate") or every Gaussian keeps its state at the
+# window's end ("hold": the persistence forecast, where the backtest found no law better than it).
+Future = Literal["integrate", "hold"]
+FUTURES: tuple[str, ...] = get_args(Future)
 # Where a material point that is not a Gaussian takes its velocity (spec/motion.md): "gaussians"
 # with mixing weights interpolated from its nearest Gaussians' own (VG-FIELD-GAUSS, the affine
 # velocity's), "network" from the networks at the point (the velocity MLP of no-pds). Resolved
@@ -166,7 +170,9 @@ class MotionSpec(NetworkSizes):
       scheme "adf-step" with the affine velocity; its weight is train.lambda_carry;
     query_code: where a material point that is not a Gaussian takes its mixing weights:
       "gaussians" from its nearest Gaussians' (VG-FIELD-GAUSS) under the affine velocity,
-      "network" elsewhere (the velocity MLP of no-pds reads the point itself).
+      "network" elsewhere (the velocity MLP of no-pds reads the point itself);
+    future: past max_time the motion carries on ("integrate") or holds every Gaussian at its
+      state at max_time with zero velocity ("hold", spec/motion.md "The future past the window").
     The defaults are the plan of the default config for a scene that declares nothing, over
     the whole window (tests/app/test_profile.py pins it), so a spec built directly for the
     pure functions names only what it changes. Masks and effects are tuples so the spec stays
@@ -198,6 +204,7 @@ class MotionSpec(NetworkSizes):
     carry_offset: float = 0.0
     carry_loss: bool = False
     query_code: QueryCode = "gaussians"
+    future: Future = "integrate"
 
     def __post_init__(self):
         for field in fields(NetworkSizes):
@@ -218,6 +225,8 @@ class MotionSpec(NetworkSizes):
             raise ValueError(f"max_time: expected a time in (0, 1], got {self.max_time!r}")
         if self.rigid_knots not in (2, 3) or isinstance(self.rigid_knots, bool):
             raise ValueError(f"rigid_knots: expected 2 or 3, got {self.rigid_knots!r}")
+        if self.future not in FUTURES:
+            raise ValueError(f"future: expected one of {FUTURES}, got {self.future!r}")
 
     @property
     def rigid_patterns(self) -> bool:

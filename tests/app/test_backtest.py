@@ -11,8 +11,8 @@ import torch
 from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.scenes import make_scene
-from velogauss.train.backtest import (CANDIDATES, backtest, candidate_spec, candidates, choose_form, harmonic_fit,
-                                      origins, probe_config, rigid_fit, select)
+from velogauss.train.backtest import (CANDIDATES, backtest, beats_freezing, candidate_spec, candidates, choose_form,
+                                      harmonic_fit, origins, probe_config, rigid_fit, select)
 from velogauss.train.frequency import series_frequency
 from velogauss_core.constants import BACKTEST_HEADS, FREQ_SCAN_STEP
 from velogauss_fast.motion.basis import basis_matrix
@@ -120,6 +120,15 @@ def test_a_richer_form_is_chosen_only_when_it_predicts_better_at_every_origin():
     assert select({}) == "mlp"
 
 
+def test_the_future_holds_when_no_form_beats_freezing():
+    # The mean score of the choice decides, as for the choice itself.
+    assert beats_freezing({"rigid": [0.9, 1.05], "mlp": [1.1, 1.4]}, "rigid")
+    scores = {"rigid": [0.9, 1.2], "harmonic": [1.5, 1.3], "mlp": [1.1, 1.4]}
+    assert select(scores) == "mlp" and not beats_freezing(scores, "mlp")
+    # No paths to score (nothing moved, or too few times): nothing was shown to beat freezing.
+    assert not beats_freezing({}, select({}))
+
+
 def test_the_origins_are_the_heads_last_times_with_a_tail_to_score():
     # 16 times j / 15 of the window: the last at or before 0.5, 0.6 and 0.7 are j = 7, 9, 10.
     assert BACKTEST_HEADS == (0.5, 0.6, 0.7) and origins(TIMES) == [7, 9, 10]
@@ -138,6 +147,12 @@ def test_a_choice_is_written_into_the_config_and_never_read_from_the_scene(tiny_
     chosen, report = choose_form(cfg, tiny_scene, probe_run)
     assert chosen.model.patterns in {"mlp", "rigid", "harmonic"}
     assert report["choice"] in CANDIDATES and chosen.model.mixing_init in {"uniform", "clusters"}
+    # The future follows the report's scores: held exactly when the choice did not beat freezing.
+    assert chosen.model.future == report["future"] == ("integrate" if beats_freezing(report["scores"], report["choice"])
+                                                       else "hold")
+    # A future the user set is kept.
+    kept = load_config(None, [*SMALL, "train.iterations=30", "train.threads=1", "model.future=integrate"])
+    assert choose_form(kept, tiny_scene, probe_run)[0].model.future == "integrate"
     # The same data with other declared effects chooses the same: the declaration is not read.
     tiny_scene.metadata["effects"] = ["stretch", "oscillation"]
     again, _ = choose_form(cfg, tiny_scene, probe_run)

@@ -112,6 +112,17 @@ def test_freeze_baseline_renders_at_max_time():
     assert own["mean"]["psnr"] == pytest.approx(100.0, abs=1e-3)
 
 
+def test_background_baseline_scores_an_empty_render():
+    # Frames of uniform brightness 204/255 and 230/255 against a white background (1): errors
+    # 51/255 = 0.2 and 25/255 -> PSNR 13.9794 and 20.1720 dB; a frame that is the background scores 100.
+    frames = [_frame(204 / 255, 204), _frame(230 / 255, 230), _frame(1.0, 255)]
+    base = evaluate.background_baseline(frames, np.ones(3))
+    expected = [-20 * math.log10(51 / 255), -20 * math.log10(25 / 255), 100.0]
+    assert base["count"] == 3 and [r["psnr"] for r in base["frames"]] == pytest.approx(expected, abs=1e-3)
+    assert base["mean"]["psnr"] == pytest.approx(np.mean(expected), abs=1e-3)
+    assert base["frames"][2]["ssim"] == pytest.approx(1.0)
+
+
 class VelocityModel:
     """Stand-in motion model: particle velocity `scale · v_true` of the material point that
     started at x0 (computed from x0, so a wrong start shows), Eulerian field
@@ -237,6 +248,10 @@ def test_markdown_tables():
     }
     text = evaluate.metrics_markdown(result)
     assert "| interpolation (t ≤ 0.75) | 1 | 31.23 | 0.9500 | — | — |" in text
+    assert "empty render" not in text  # results written before the empty-render baseline still read
+    result["background_baseline"] = {"interpolation": {"count": 1, "mean": {"psnr": 28.176, "ssim": 0.9}}}
+    assert ("| interpolation, baseline: an empty render (the background alone) | 1 | 28.18 | 0.9000 | — | — |"
+            in evaluate.metrics_markdown(result))
     assert "| val/a.png | 0.500 | 31.23 | 0.9500 | — | — |" in text
 
 

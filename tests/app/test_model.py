@@ -1,5 +1,7 @@
 """velogauss.model: the resolved MotionSpec, the parameter module and the pure motion functions."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -7,7 +9,7 @@ import torch
 from velogauss.config import ModelConfig
 from velogauss.model.velogauss_model import VeloGaussModel
 from velogauss.model.gaussians import Gaussians
-from velogauss.model.motion import MotionParameters, gaussians_at, motion_residuals, velocity_at
+from velogauss.model.motion import MotionParameters, gaussians_at, motion_residuals, particle_velocity, velocity_at
 from velogauss.model.spec import ABLATION_SWITCHES, resolve_motion_spec
 from velogauss_core.motion import ABLATIONS
 
@@ -115,6 +117,49 @@ def test_mlp_velocity_moves_positions_only():
     torch.testing.assert_close(velocity_at(params, spec, x0, 0.3), torch.tensor([0.5, 0.0, 0.0]).expand(16, 3))
     r, div = motion_residuals(params, spec, x0, 0.3)  # constant v, no acceleration: r = 0, div = 0
     assert div is None and torch.allclose(r, torch.zeros_like(r), atol=1e-6)
+
+
+@pytest.mark.parametrize("future, shift_at_09", [("integrate", 0.45), ("hold", 0.375)])
+def test_a_held_future_keeps_the_state_at_the_window_end(future, shift_at_09):
+    # The constant MLP velocity above (0.5 along x), window end 0.75: integrating gives x0 + 0.5 t;
+    # holding stops at x0 + 0.5 * 0.75 = 0.375 with zero velocity past the window, nothing inside it.
+    x0, q0, s0 = _canonical()
+    spec = _spec("no-pds", future=future)
+    assert spec.future == future
+    motion = MotionParameters(spec, np.random.default_rng(4))
+    with torch.no_grad():
+        motion.velocity_mlp[-1].copy_(torch.tensor([0.5, 0.0, 0.0]))
+        motion.acc.zero_()
+    params = motion.params()
+    inside = gaussians_at(params, spec.without_adf(), x0, q0, s0, 0.5)[0]
+    torch.testing.assert_close(inside, x0 + torch.tensor([0.25, 0.0, 0.0]), rtol=0, atol=1e-6)
+    past = gaussians_at(params, spec.without_adf(), x0, q0, s0, 0.9)[0]
+    torch.testing.assert_close(past, x0 + torch.tensor([shift_at_09, 0.0, 0.0]), rtol=0, atol=1e-6)
+    speed = 0.0 if future == "hold" else 0.5
+    torch.testing.assert_close(velocity_at(params, spec, x0, 0.9), torch.tensor([speed, 0.0, 0.0]).expand(16, 3))
+    torch.testing.assert_close(velocity_at(params, spec, x0, 0.75), torch.tensor([0.5, 0.0, 0.0]).expand(16, 3))
+
+
+def test_a_held_affine_model_answers_with_its_window_end_past_it():
+    x0, q0, s0 = _canonical()
+    spec = _spec("full", future="hold")
+    motion = MotionParameters(spec, np.random.default_rng(2))
+    with torch.no_grad():
+        motion.time[-1].normal_(generator=torch.Generator().manual_seed(3))
+        motion.adf[-1].normal_(generator=torch.Generator().manual_seed(5))
+    params = motion.params()
+    end = gaussians_at(params, spec, x0, q0, s0, 0.75)
+    for t in (0.8, 1.0, 1.4):
+        for a, b in zip(gaussians_at(params, spec, x0, q0, s0, t), end):
+            assert torch.equal(a, b)
+        assert torch.equal(velocity_at(params, spec, end[0], t), torch.zeros_like(x0))
+        assert torch.equal(particle_velocity(params, spec, x0, end[0], t), torch.zeros_like(x0))
+    # Integrating, the same parameters move on past the window.
+    free = dataclasses.replace(spec, future="integrate")
+    assert not torch.allclose(gaussians_at(params, free, x0, q0, s0, 1.0)[0], end[0])
+    assert velocity_at(params, free, end[0], 1.0).abs().max() > 0
+    with pytest.raises(ValueError, match="future: expected one of"):
+        dataclasses.replace(spec, future="freeze")
 
 
 def test_model_rejects_motion_that_does_not_match_its_spec():

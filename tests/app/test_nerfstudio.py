@@ -239,6 +239,22 @@ def test_without_lists_every_kth_camera_is_held_out(tmp_path):
         load_nerfstudio(root, heldout_every=1)
 
 
+def test_named_cameras_are_held_out_instead_of_every_kth(tmp_path):
+    root = _write(tmp_path / "s", train_filenames=None, val_filenames=None, test_filenames=None)
+    # Camera 0 (z = 4: f0, f1) named: it never trains; camera 1 (f2, f3) does, f3 being its future.
+    scene = load_scene(root, max_time=0.7, heldout_cameras=[0])
+    assert [_name(f) for f in scene.train] == ["f2"]
+    assert [_name(f) for f in scene.interpolation] == ["f0", "f1"]
+    assert [_name(f) for f in scene.extrapolation] == ["f3"]
+    with pytest.raises(DataError, match=r"transforms\.json: frames: .*camera\(s\) \[2\].*cameras are \[0, 1\]"):
+        load_scene(root, heldout_cameras=[2])
+    with pytest.raises(DataError, match=r"transforms\.json: frames: .*every camera"):
+        load_scene(root, heldout_cameras=[0, 1])
+    listed = _write(tmp_path / "listed")
+    with pytest.raises(DataError, match=r"transforms\.json: train_filenames: the file lists its own split"):
+        load_scene(listed, heldout_cameras=[0])
+
+
 # --- bad input ---------------------------------------------------------------------------
 
 def _missing_image(root):

@@ -242,6 +242,8 @@ scenes = ["spin"]
     assert "bogus" in rows["spin-full-s0-model.integrator=bogus"]["error"]
     for name in ("toss-full-s0", "toss-no-adf-s0"):
         assert np.isfinite(float(rows[name]["extrap_psnr"])) and float(rows[name]["train_min"]) > 0
+        # A torch process's own peak resident memory: above the interpreter's, far below the machine's.
+        assert 0.1 < float(rows[name]["train_peak_gb"]) < 8
         assert load_config(tmp_path / "out" / name / "config.toml").train.iterations == 12
     assert (tmp_path / "out" / "plots" / "extrap_psnr.png").stat().st_size > 0
     assert "| toss-no-adf | 1 |" in (tmp_path / "out" / "results.md").read_text()

@@ -278,6 +278,18 @@ def fidelity_command(
                        cache=str(cache), threads=threads, plot=str(plot))
 
 
+@bench_app.command("dnerf")
+def dnerf_command(
+    sweep: Path = typer.Argument(..., help="The folder of `velogauss sweep benchmarks/grids/dnerf_standard.toml`."),
+    write: Optional[Path] = typer.Option(None, "--write", help="Also write the Markdown to this file."),
+):
+    """The D-NeRF reconstruction table of a finished sweep beside DefGS's and 4DGS's published figures (Markdown)."""
+    from velogauss.bench import dnerf
+
+    with user_errors():
+        typer.echo(dnerf.table(sweep, write), nl=False)
+
+
 family_app = typer.Typer(
     help="The scene family's study (velogauss.bench.family): `scenes` renders seeds' scenes and their sweep "
          "grid, `table` the per-scene scores, their spread by kind of motion and the targets.",

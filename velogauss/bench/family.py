@@ -14,7 +14,8 @@ metrics.json (`velogauss.evaluate.evaluate_model`'s result) into one row per sce
   baseline's `freeze_baseline.mean.psnr` (the last observed instant held still);
 - the deform-only run's extrapolation PSNR: what the velocity field buys over a deformation
   network alone;
-- the run folder's `motion_form.json` `choice` (`model.patterns = "auto"`), when written.
+- the run folder's `motion_form.json` `choice` (`model.patterns = "auto"`), when written, marked
+  "(held)" when its `future` is "hold".
 
 Then the distributions (over all scenes, and per kind of motion: a scene counts under each
 kind of its moving bodies) and the targets, met or missed. Runs of `ABLATIONS` that have not
@@ -169,7 +170,10 @@ def scene_row(scene, full_run, deform_run):
     deform = deform_run / "metrics.json"
     deform_extrap = _at(json.loads(deform.read_text()), "splits", "extrapolation", "mean", "psnr") \
         if deform.is_file() else None
-    form = full_run / "motion_form.json"
+    form_file = full_run / "motion_form.json"
+    report = json.loads(form_file.read_text()) if form_file.is_file() else {}
+    # A held future (no form beat freezing, model.future "auto") is part of what the run chose.
+    form = None if "choice" not in report else report["choice"] + (" (held)" if report.get("future") == "hold" else "")
     return {"seed": scene["family"]["seed"], "kinds": tuple(params["kinds"]), "rig": params["rig"],
             "px": scene["generator"]["resolution"][0], "frames": scene["generator"]["n_times"],
             "vel_obs": _at(metrics, "motion", "velocity", "observed", "relative_l2"),
@@ -177,7 +181,7 @@ def scene_row(scene, full_run, deform_run):
             "interp": _at(metrics, "splits", "interpolation", "mean", "psnr"), "extrap": extrap, "frozen": frozen,
             "gain_frozen": _difference(extrap, frozen), "deform_extrap": deform_extrap,
             "gain_deform": _difference(extrap, deform_extrap),
-            "form": json.loads(form.read_text()).get("choice") if form.is_file() else None}
+            "form": form}
 
 
 def _at(tree, *keys):

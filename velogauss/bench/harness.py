@@ -11,6 +11,7 @@ from collections.abc import Callable
 import torch
 
 from velogauss.io_utils import write_text
+from velogauss.memory import status_kib
 
 
 def timed_passes(step: Callable[[], object], repeats: int) -> list[float]:
@@ -23,12 +24,6 @@ def timed_passes(step: Callable[[], object], repeats: int) -> list[float]:
         step()
         times.append(time.perf_counter() - t0)
     return times
-
-
-def status_kib(field):
-    """A /proc/self/status field in KiB (VmRSS, VmHWM, ...)."""
-    with open("/proc/self/status") as f:
-        return int(re.search(rf"^{field}:\s+(\d+) kB", f.read(), re.M).group(1))
 
 
 def reset_peak_memory(device):

@@ -42,7 +42,8 @@ from dataclasses import dataclass
 import torch
 
 from velogauss.bench.harness import (device_section, machine, peak_above_mib, regenerate_command,
-                                      reset_peak_memory, status_kib, timed_passes, write_section)
+                                      reset_peak_memory, timed_passes, write_section)
+from velogauss.memory import status_kib
 from velogauss_fast.backends import gsplat_available
 from velogauss_core.constants import ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN
 

@@ -1,7 +1,8 @@
 """Datasets: cameras in the spec's conventions, the D-NeRF/NVFi, nerfstudio and Panoptic loaders, point clouds.
 
-`load_scene(path, max_time=None, half_res=False, background=(1, 1, 1), split="time", format="auto")
--> SceneData` detects the folder's layout (or takes `format`: "dnerf", "nerfstudio", "panoptic"), validates
+`load_scene(path, max_time=None, half_res=False, background=(1, 1, 1), split="time", format="auto",
+heldout_cameras="auto") -> SceneData` detects the folder's layout (or takes `format`: "dnerf",
+"nerfstudio", "panoptic"), takes the layout's held-out cameras or the ones named, validates
 the whole scene folder up front and raises one `DataError` (a ValueError naming the file and
 field) for bad data; `check_trainable_size(scene)` refuses images smaller than the SSIM window
 before training or evaluation.
@@ -13,6 +14,7 @@ from velogauss.data import dnerf, nerfstudio, panoptic
 from velogauss.data.cameras import Camera
 from velogauss.data.dnerf import Frame, SceneData, check_trainable_size
 from velogauss.data.errors import DataError
+from velogauss.data.heldout import AUTO, check_heldout
 from velogauss.data.ply import PointCloud, read_ply, write_ply
 
 # Each layout's loader and the files that mark a folder as that layout (all of them present).
@@ -42,16 +44,27 @@ def detect_format(path):
     return found[0]
 
 
-def load_scene(path, max_time=None, half_res=False, background=None, split="time", format="auto"):
+def load_scene(path, max_time=None, half_res=False, background=None, split="time", format="auto",
+               heldout_cameras=AUTO):
     """Load and validate the scene folder `path` into a `SceneData`: `format` "auto" (the default)
-    detects the layout (`detect_format`), "dnerf", "nerfstudio" or "panoptic" forces one; the other arguments
-    are those of `velogauss.data.dnerf.load_scene`. DataError naming `format` for another value."""
+    detects the layout (`detect_format`), "dnerf", "nerfstudio" or "panoptic" forces one;
+    `heldout_cameras` "auto" keeps the layout's own held-out split, a list of camera ids holds those
+    cameras out (nerfstudio and Panoptic; `velogauss.data.heldout`); the other arguments are those of
+    `velogauss.data.dnerf.load_scene`. DataError naming `format` for another value, and
+    `data.heldout_cameras` for ids given to a D-NeRF folder (its val file is the held-out split)."""
     if format not in FORMATS:
         raise DataError(None, "format", f"expected one of {', '.join(FORMATS)}, got {format!r}")
     dnerf.check_arguments(max_time, half_res, background, split)  # bad arguments first, whatever the folder
+    heldout_cameras = check_heldout(heldout_cameras)
     layout = detect_format(path) if format == "auto" else format
     loader = LAYOUTS[layout][0]
-    return loader(path, max_time=max_time, half_res=half_res, background=background, split=split)
+    options = dict(max_time=max_time, half_res=half_res, background=background, split=split)
+    if heldout_cameras == AUTO:
+        return loader(path, **options)
+    if layout == "dnerf":
+        raise DataError(path, "data.heldout_cameras", "a D-NeRF folder has no camera ids (its held-out views "
+                        "are transforms_val.json's); leave it \"auto\"")
+    return loader(path, heldout_cameras=heldout_cameras, **options)
 
 
 __all__ = ["Camera", "DataError", "FORMATS", "LAYOUTS", "Frame", "PointCloud", "SceneData", "check_trainable_size",

@@ -30,7 +30,8 @@ Splits: the frames fall into the D-NeRF files' three roles, then split exactly a
   absent list empty; a frame may be in several lists; frames in none are not used).
 - without them, held-out cameras: frames with the same `transform_matrix` and intrinsics are one
   camera, numbered in order of first appearance; cameras `heldout_every − 1, 2·heldout_every − 1,
-  ...` are held out (fewer cameras than `heldout_every`: none). Under "time", train = the other
+  ...` are held out (fewer cameras than `heldout_every`: none), or the numbers that
+  `data.heldout_cameras` names (refused beside filename lists). Under "time", train = the other
   cameras' frames, val = the held-out cameras' frames, test = every frame (its frames after
   `max_time` are the extrapolation). Under "future:F", the pool sorted by time is the train
   cameras' frames only (test is empty), so held-out views never train.
@@ -42,6 +43,7 @@ from pathlib import Path
 from velogauss.data.dnerf import (INTRINSIC_KEYS, assemble_scene, number, prepare_load, read_intrinsics,
                                   read_json_object, read_pose, resolve_image, split_records)
 from velogauss.data.errors import DataError
+from velogauss.data.heldout import AUTO, check_heldout, split_cameras
 from velogauss.data.ply import read_ply
 
 TRANSFORMS_FILE = "transforms.json"
@@ -53,17 +55,20 @@ _SPLIT_LISTS = {"train": "train_filenames", "val": "val_filenames", "test": "tes
 
 
 def load_scene(path, max_time=None, half_res=False, background=None, split="time",
-               heldout_every=DEFAULT_HELDOUT_EVERY):
+               heldout_every=DEFAULT_HELDOUT_EVERY, heldout_cameras=AUTO):
     """Load and validate a nerfstudio-layout scene folder into a `SceneData` (as
     `velogauss.data.dnerf.load_scene`, whose arguments these are, plus `heldout_every`, an int ≥ 2:
-    the held-out camera period when `transforms.json` lists no split; module docstring).
+    the held-out camera period when `transforms.json` lists no split, and `heldout_cameras`: "auto"
+    (that period) or the camera numbers to hold out instead; module docstring).
 
     Every file is read and checked up front; the first problem raises one `DataError` naming the
     file and field: missing `transforms.json`, image, mask or key; missing intrinsics; a matrix
     that is not 4x4, not finite or not rigid; an unsupported `camera_model` or a non-zero
     distortion coefficient; an image or mask that does not decode; a filename list naming no
-    frame; an empty split.
+    frame; an empty split; held-out cameras named beside filename lists, or cameras the file does
+    not have.
     """
+    heldout_cameras = check_heldout(heldout_cameras)
     if isinstance(heldout_every, bool) or not isinstance(heldout_every, int) or heldout_every < 2:
         raise DataError(None, "heldout_every", f"expected an integer >= 2, got {heldout_every!r}")
     root, fraction, max_time, background, metadata = prepare_load(path, max_time, half_res, background, split)
@@ -73,7 +78,8 @@ def load_scene(path, max_time=None, half_res=False, background=None, split="time
     meta = read_json_object(file)
     _check_camera_model(file, meta)
     records = _read_frames(file, meta)
-    groups, where = _roles(file, meta, records, future=fraction is not None, heldout_every=heldout_every)
+    groups, where = _roles(file, meta, records, future=fraction is not None, heldout_every=heldout_every,
+                           heldout_cameras=heldout_cameras)
     train, interpolation, extrapolation, max_time = split_records(root, groups, split, fraction, max_time, where)
 
     if "ply_file_path" in meta:
@@ -149,9 +155,12 @@ def _read_frames(file, meta):
     return records
 
 
-def _roles(file, meta, records, *, future, heldout_every):
+def _roles(file, meta, records, *, future, heldout_every, heldout_cameras):
     """The records' D-NeRF roles {"train", "val", "test"} and the fields the empty-split errors name."""
     listed = [key for key in _SPLIT_LISTS.values() if key in meta]
+    if listed and heldout_cameras != AUTO:
+        raise DataError(file, listed[0], "the file lists its own split, so data.heldout_cameras must be \"auto\" "
+                        "(remove the filename lists to choose the held-out cameras)")
     if listed:
         if _SPLIT_LISTS["train"] not in meta:
             raise DataError(file, _SPLIT_LISTS["train"], f"missing key, while {', '.join(listed)} "
@@ -162,8 +171,11 @@ def _roles(file, meta, records, *, future, heldout_every):
     for record in records:
         key = (record["c2w"].tobytes(), tuple(sorted((k, v) for k, (v, _) in record["intrinsics"].items())))
         record["camera_index"] = cameras.setdefault(key, len(cameras))
-    held = [r for r in records if r["camera_index"] % heldout_every == heldout_every - 1]
-    kept = [r for r in records if r["camera_index"] % heldout_every != heldout_every - 1]
+    if heldout_cameras == AUTO:
+        held = [r for r in records if r["camera_index"] % heldout_every == heldout_every - 1]
+        kept = [r for r in records if r["camera_index"] % heldout_every != heldout_every - 1]
+    else:
+        kept, held = split_cameras(records, heldout_cameras, "camera_index", file, "frames")
     groups = {"train": kept, "val": held, "test": [] if future else list(records)}
     return groups, {"train": (file, "frames"), "test": (file, "frames")}
 

@@ -20,10 +20,12 @@ train.py: `construct_timestep_dataset`, `initialize_params`). Paths are relative
   authors' `initialize_params` reads it): its xyz and rgb are the initial point cloud.
 
 Splits: `train_meta.json`'s frames are the train role, `test_meta.json`'s (the held-out interpolation
-cameras) the val role; then, exactly as the nerfstudio loader without filename lists, under "time"
-the test role is every frame (its frames after `max_time` are the extrapolation), under "future:F"
-the test role is empty, so the time-sorted pool is the train cameras' frames and held-out views
-never train. `split_records` does the rest, as for every layout.
+cameras) the val role, joined by the frames of the `cam_id`s named in `data.heldout_cameras` (a
+capture without `test_meta.json` then has held-out views too); then, exactly as the nerfstudio
+loader without filename lists, under "time" the test role is every frame (its frames after
+`max_time` are the extrapolation), under "future:F" the test role is empty, so the time-sorted
+pool is the train cameras' frames and held-out views never train. `split_records` does the
+rest, as for every layout.
 """
 
 from pathlib import Path
@@ -34,6 +36,7 @@ from velogauss.data.cameras import check_rigid
 from velogauss.data.dnerf import (assemble_scene, number, number_array, prepare_load, read_json_object,
                                   resolve_image, split_records)
 from velogauss.data.errors import DataError
+from velogauss.data.heldout import AUTO, check_heldout, split_cameras
 from velogauss.data.ply import PointCloud
 
 TRAIN_META = "train_meta.json"
@@ -45,16 +48,20 @@ _PER_STEP_KEYS = ("k", "w2c", "fn", "cam_id")
 _OPENGL_FROM_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
-def load_scene(path, max_time=None, half_res=False, background=None, split="time"):
+def load_scene(path, max_time=None, half_res=False, background=None, split="time", heldout_cameras=AUTO):
     """Load and validate a Panoptic-layout scene folder into a `SceneData` (as
-    `velogauss.data.dnerf.load_scene`, whose arguments these are; module docstring for the layout).
+    `velogauss.data.dnerf.load_scene`, whose arguments these are, plus `heldout_cameras`: "auto", or
+    `cam_id`s of `train_meta.json` whose frames are held out beside `test_meta.json`'s; module
+    docstring for the layout).
 
     Every file is read and checked up front; the first problem raises one `DataError` naming the
     file and field: missing `train_meta.json`, key or image; `w`/`h` not positive integers or
     disagreeing with the images; a `k` not 3x3 (or with skew, a non-unit last row), a `w2c` not 4x4 or
     not rigid, NaN or inf in either; lists of different lengths or camera counts that change across
-    time steps; a JPEG or mask that does not decode; a malformed `init_pt_cld.npz`; an empty split.
+    time steps; a JPEG or mask that does not decode; a malformed `init_pt_cld.npz`; an empty split; a
+    held-out `cam_id` that `train_meta.json` does not have, or every one of them.
     """
+    heldout_cameras = check_heldout(heldout_cameras)
     root, fraction, max_time, background, metadata = prepare_load(path, max_time, half_res, background, split)
     train_file, test_file = root / TRAIN_META, root / TEST_META
     if not train_file.is_file():
@@ -65,7 +72,11 @@ def load_scene(path, max_time=None, half_res=False, background=None, split="time
     if held and held[-1]["steps"] != train[-1]["steps"]:
         raise DataError(test_file, "fn", f"has {held[-1]['steps']} time steps but {TRAIN_META} has "
                         f"{train[-1]['steps']}; both must cover the same time steps")
-    groups = {"train": train, "val": held, "test": [] if fraction is not None else train + held}
+    every = train + held
+    if heldout_cameras != AUTO:
+        train, chosen = split_cameras(train, heldout_cameras, "cam_id", train_file, "cam_id")
+        held = held + chosen
+    groups = {"train": train, "val": held, "test": [] if fraction is not None else every}
     where = {"train": (train_file, "fn"), "test": (train_file, "fn")}
     train, interpolation, extrapolation, max_time = split_records(root, groups, split, fraction, max_time, where)
     cloud = _read_point_cloud(root / POINT_CLOUD_FILE) if (root / POINT_CLOUD_FILE).is_file() else None

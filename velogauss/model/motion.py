@@ -12,6 +12,9 @@ Everything the motion computes is a pure function of that dict and the resolved
   given mixing weights (VG-FIELD-GAUSS, which `velogauss.model.velogauss_model` interpolates);
 - `motion_residuals`: the physics residuals of the training loss.
 
+Under `spec.future = "hold"` the state and velocities past `spec.max_time` are those of the
+persistence forecast (`held`); the physics residuals, a training loss, read the field as it is.
+
 What is built follows the spec: the velocity's time network ("affine", PDS) or the
 unconstrained velocity MLP ("mlp", no-pds) or neither (deform-only); the acceleration
 polynomial Q only when the spec accelerates; the ADF only when the ablation keeps it.
@@ -82,6 +85,12 @@ class MotionParameters(nn.Module):
         return out
 
 
+def held(spec: MotionSpec, t) -> bool:
+    """Whether t lies past the observed window of a model that holds its motion there
+    (spec.future "hold"): its Gaussians then keep their state at spec.max_time, with zero velocity."""
+    return spec.future == "hold" and float(t) > spec.max_time
+
+
 def inline_adf(params: dict, x0: torch.Tensor, t, z: torch.Tensor, cfg):
     """`gaussians_at`'s default evaluation of the ADF's residual: a function returning
     `adf_residual(params, x0, t, z, cfg)` (dx (N, 3), dq (N, 4), ds (N, 3)), computed when called."""
@@ -105,7 +114,10 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
     spec)` called before the integration and returning a function that gives (Δx, Δq,
     Δs) after it; None: `inline_adf`. Training passes one whose backward overlaps the
     integration's (velogauss.train.loop).
+    Past the window under spec.future "hold" this is the state at spec.max_time (`held`).
     """
+    if held(spec, t):
+        t = spec.max_time
     z = physics_code(params, x0, spec)
     if spec.scheme == "adf-step":
         x, q, s = _carried_state(params, spec, x0, q0, s0, z, t, carry_start(t, offset, spec.carry_until))
@@ -126,7 +138,9 @@ def gaussians_at(params: dict, spec: MotionSpec, x0: torch.Tensor, q0: torch.Ten
 
 def velocity_at(params: dict, spec: MotionSpec, x: torch.Tensor, t) -> torch.Tensor:
     """The Eulerian velocity v(x, t) (N, 3) at world points x (N, 3) (VG-FIELD, or the MLP's
-    VG-VEL-MLP); zero without a velocity."""
+    VG-VEL-MLP); zero without a velocity, and past the window of a held motion (`held`)."""
+    if held(spec, t):
+        return torch.zeros_like(x)
     if spec.velocity == "affine":
         return velocity_field(params, x, t, spec)
     if spec.velocity == "mlp":
@@ -137,7 +151,10 @@ def velocity_at(params: dict, spec: MotionSpec, x: torch.Tensor, t) -> torch.Ten
 def particle_velocity(params: dict, spec: MotionSpec, x0: torch.Tensor, x: torch.Tensor, t) -> torch.Tensor:
     """Velocity (N, 3) of the particles that started at x0 (N, 3), when at x (N, 3) at time t:
     Φ(x) w(t, E(γ(x0))), the code frozen at the start as along a path (VG-VEL, VG-TRAJ).
-    Without PDS the velocity MLP has no code: the Eulerian field at x. Zero without a velocity."""
+    Without PDS the velocity MLP has no code: the Eulerian field at x. Zero without a velocity,
+    and past the window of a held motion (`held`)."""
+    if held(spec, t):
+        return torch.zeros_like(x)
     if spec.velocity == "affine":
         return velocity(x, coefficients(params, t, physics_code(params, x0, spec), spec))
     return velocity_at(params, spec, x, t)
@@ -151,7 +168,10 @@ def own_mixing(params: dict, spec: MotionSpec, x0: torch.Tensor) -> torch.Tensor
 
 def velocity_with_mixing(params: dict, spec: MotionSpec, x: torch.Tensor, t, m: torch.Tensor) -> torch.Tensor:
     """Φ(x) (m P(t)) (N, 3), masked as VG-COEF, at points x (N, 3) with mixing weights m (N, K):
-    the velocity of VG-FIELD-GAUSS, whose m is interpolated from the Gaussians' own."""
+    the velocity of VG-FIELD-GAUSS, whose m is interpolated from the Gaussians' own; zero past
+    the window of a held motion (`held`)."""
+    if held(spec, t):
+        return torch.zeros_like(x)
     return velocity(x, mixed_coefficients(params, t, m, spec))
 
 

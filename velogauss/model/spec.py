@@ -117,6 +117,8 @@ def resolve_motion_spec(model_cfg, metadata: dict | None, max_time: float) -> Mo
         carry_offset=float(model_cfg.carry_offset) if carry else 0.0,
         carry_loss=carry and velocity == "affine",
         query_code="gaussians" if velocity == "affine" else "network",
+        # "auto" is resolved by the backtest before this (velogauss.train.backtest); without one it integrates.
+        future="integrate" if model_cfg.future == "auto" else model_cfg.future,
     )
 
 

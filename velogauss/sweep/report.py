@@ -29,7 +29,7 @@ METRICS = (
     ("extrap_psnr", "extrap PSNR", 2), ("extrap_ssim", "extrap SSIM", 3), ("extrap_lpips", "extrap LPIPS", 3),
     ("frozen_psnr", "frozen PSNR", 2), ("velocity_rel_error", "particle velocity rel. error", 3),
     ("field_rel_error", "Eulerian field rel. error", 3), ("future_trajectory_error", "future trajectory error", 3),
-    ("gaussians", "Gaussians", 0), ("train_min", "train min", 1),
+    ("gaussians", "Gaussians", 0), ("train_min", "train min", 1), ("train_peak_gb", "train peak GB", 2),
 )
 
 
@@ -53,6 +53,7 @@ def run_metrics(run_dir):
         "future_trajectory_error": motion.get("trajectory", {}).get("future", {}).get("mean_distance"),
         "gaussians": last.get("n_gaussians"),
         "train_min": None if "elapsed_s" not in last else last["elapsed_s"] / 60.0,
+        "train_peak_gb": None if last.get("peak_rss_mib") is None else last["peak_rss_mib"] / 1024,
     }
 
 

@@ -162,7 +162,8 @@ def run_sweep(sweep, out_dir, address=None, cpus=None, echo=print):
         except (ConnectionError, RuntimeError) as err:
             raise ValueError(f"--address: cannot join a Ray cluster at {address!r} ({err})") from None
     try:
-        remote = ray.remote(train_point)
+        # One process a run (max_calls=1): its peak resident memory, logged by the training, is its own.
+        remote = ray.remote(max_calls=1)(train_point)
         pending = {remote.options(num_cpus=p.point.threads, name=p.point.name, max_retries=0)
                    .remote(p, sweep.config, p.point.threads): p for p in todo}
         echo(f"{len(todo)} run(s) on Ray ({ray.cluster_resources().get('CPU', 0):g} CPUs); "

@@ -19,8 +19,10 @@ the video alone, never from a scene's name or declared effects:
    replaces the choice only when it predicts better at every origin; the choice stands when its
    mean score is below 1, else the time network. That is the run's `model.patterns` (and, for a
    drifting rigid centre, its effects without gravity); the run then trains from scratch with
-   it, as if it had been set. config.toml records it, and the run folder's `motion_form.json`
-   holds every candidate's scores.
+   it, as if it had been set. When no candidate beat freezing, `model.future = "auto"` becomes
+   "hold": past the window the run shows the persistence forecast, which the backtest found
+   best. config.toml records both, and the run folder's `motion_form.json` holds every
+   candidate's scores.
 
 The probe also says whether still Gaussians lie beside moving ones (`model.mixing_init =
 "auto"`: the mixing weights then start apart) and, for oscillators, the paths' own frequency,
@@ -110,10 +112,13 @@ def choose_form(cfg, data, run, progress=False):
     choice = select(scores)
     form, effects = candidates(m.effects)[choice]
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
-    model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects)
+    future = m.future
+    if future == "auto":
+        future = "integrate" if beats_freezing(scores, choice) else "hold"
+    model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects, future=future)
     frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
-    report.update({"origins": heads, "scores": scores, "choice": choice, "mixing_init": mixing, "frequency": frequency,
-                   "probe_s": probe_s, "backtest_s": time.perf_counter() - clock - probe_s})
+    report.update({"origins": heads, "scores": scores, "choice": choice, "future": future, "mixing_init": mixing,
+                   "frequency": frequency, "probe_s": probe_s, "backtest_s": time.perf_counter() - clock - probe_s})
     return dataclasses.replace(cfg, model=model_cfg), report
 
 
@@ -168,6 +173,13 @@ def select(scores):
         if choice is None or all(a < b for a, b in zip(row, scores[choice])):
             choice = name
     return choice if choice is not None and np.mean(scores[choice]) < 1.0 else "mlp"
+
+
+def beats_freezing(scores, choice):
+    """Whether the chosen candidate predicts the held-out tails better than freezing the motion:
+    its mean score below 1. Without scores (nothing moved, or no tail to hold out) nothing was
+    shown to, and the run's future holds (`model.future = "auto"`)."""
+    return choice in scores and float(np.mean(scores[choice])) < 1.0
 
 
 def origins(times):

@@ -37,6 +37,7 @@ from velogauss.config import (check_resume_config, config_from_dict, resolve_fro
                               resolve_transport, to_toml)
 from velogauss.data import check_trainable_size
 from velogauss.io_utils import write_text
+from velogauss.memory import peak_rss_mib
 from velogauss.model import build_model, model_from_state, scene_spec
 from velogauss.model.velogauss_model import moving_state_at, render_gaussians
 from velogauss.threads import apply_threads
@@ -372,7 +373,8 @@ class Trainer:
             model.set_moving(detect_moving(model, self.cfg.data.max_time, threshold, self.spec_at(done - 1)))
 
     def log_eval(self, done, loss_value, train_psnr, elapsed):
-        """Append one evaluation record to log.jsonl."""
+        """Append one evaluation record to log.jsonl (`peak_rss_mib`: the process's peak resident
+        memory so far, which under `velogauss sweep` is the run's own, one process a run)."""
         with torch.no_grad():
             spec = self.spec_at(done - 1)
             scores = [float(psnr(self.model.render(f.camera, f.time, self.background, spec)[0].clamp(0, 1),
@@ -380,7 +382,7 @@ class Trainer:
         record = {"iteration": done, "loss": loss_value, "train_psnr": train_psnr,
                   "interp_psnr": float(np.mean(scores)) if scores else None,
                   "n_gaussians": len(self.model.gaussians), "n_moving": int(self.model.moving.sum()),
-                  "elapsed_s": round(elapsed, 3)}
+                  "elapsed_s": round(elapsed, 3), "peak_rss_mib": peak_rss_mib()}
         with open(self.run_dir / "log.jsonl", "a") as handle:
             handle.write(json.dumps(record) + "\n")
 
