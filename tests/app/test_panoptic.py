@@ -223,3 +223,4 @@ def test_format_flag_and_make_scene_cli(tmp_path, pair):
     assert result.exit_code == 0, result.output
     assert detect_format(tmp_path / "s") == "panoptic"
     assert json.loads((tmp_path / "s" / "scene.json").read_text())["generator"]["format"] == "panoptic"
+
