@@ -27,8 +27,8 @@ from velogauss.diagnose.commands import diagnose_app
 from velogauss.errors import user_errors
 from velogauss.io_utils import check_writable
 from velogauss.run import (build_config, check_device, default_run_dir, existing_file, headline, load_run_model,
-                           load_run_scene, no_half_made_run, recorded_data_dir, refuse_existing_run, remove_run,
-                           run_evaluation, run_render, train_flags, with_data_dir)
+                           load_run_scene, motion_form_line, no_half_made_run, recorded_data_dir, refuse_existing_run,
+                           remove_run, run_evaluation, run_render, train_flags, with_data_dir)
 from velogauss.sweep.command import sweep_command
 from velogauss.threads import prepare_environment
 from velogauss.view.command import view_command
@@ -196,6 +196,9 @@ def train_command(
         except KeyboardInterrupt as err:
             typer.secho(str(err) or "training interrupted", err=True, fg=typer.colors.YELLOW)
             raise typer.Exit(EXIT_INTERRUPTED) from None
+        form = motion_form_line(run_dir)
+        if form is not None:
+            typer.echo(form)
     if not evaluate:
         typer.echo(f"run folder: {run_dir}")
         return

@@ -15,6 +15,7 @@ is cheap.
 import contextlib
 import dataclasses
 import datetime
+import json
 import shutil
 from pathlib import Path
 
@@ -208,6 +209,20 @@ def run_render(out_dir, model, scene, fps=8.0, label=True):
     from velogauss.visualize import render_run
 
     return render_run(model, scene, out_dir, fps=fps, ground_truth=_ground_truth(scene), label=label, progress=True)
+
+
+def motion_form_line(run_dir):
+    """What the backtest chose for the run in `run_dir` (its motion_form.json) as one line, or None
+    when the run chose nothing (its form was set, or the run is static)."""
+    path = Path(run_dir) / "motion_form.json"
+    if not path.is_file():
+        return None
+    report = json.loads(path.read_text())
+    scores = report.get("scores", {}).get(report["choice"])
+    scored = "" if not scores else " (tail scores " + " / ".join(f"{x:.2f}" for x in scores) + "; 1 = freezing)"
+    future = ("the future holds: no form predicted the held-out tails better than freezing the motion"
+              if report.get("future") == "hold" else "the motion is integrated past the window")
+    return f"motion form: {report['choice']}{scored}; {future}"
 
 
 def headline(result, run_dir):

@@ -180,3 +180,4 @@ def test_the_candidates_keep_within_the_effects_a_user_allows():
                                                        "rigid": ("rigid", ("translation", "rotation")),
                                                        "harmonic": ("harmonic", ("translation", "rotation"))}
     assert set(candidates(("stretch",))) == {"mlp", "harmonic"}
+

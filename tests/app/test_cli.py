@@ -2,13 +2,14 @@
 subcommand's help, the scene list, and bad input (exit code 2 and one line naming the thing).
 The train → eval → render → export path is run in tests/app/test_end_to_end.py."""
 
+import json
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 from velogauss.cli import app
-from velogauss.run import default_run_dir, parse_background, train_flags
+from velogauss.run import default_run_dir, motion_form_line, parse_background, train_flags
 from velogauss.scenes import SCENES
 from tests.app.cli_checks import assert_refused
 
@@ -155,3 +156,15 @@ def test_default_run_dir_names_scene_and_time():
 
     path = default_run_dir("toss", now=datetime.datetime(2025, 3, 4, 5, 6, 7))
     assert path == Path("runs") / "toss-20250304-050607"
+
+
+def test_the_command_says_what_was_chosen_and_whether_the_future_holds(tmp_path):
+    assert motion_form_line(tmp_path) is None  # a run whose form was set chose nothing
+    report = {"choice": "mlp", "scores": {"rigid": [1.5, 1.2, 1.1], "mlp": [1.32, 0.99, 0.84]}, "future": "hold"}
+    (tmp_path / "motion_form.json").write_text(json.dumps(report))
+    assert motion_form_line(tmp_path) == ("motion form: mlp (tail scores 1.32 / 0.99 / 0.84; 1 = freezing); the future "
+                                          "holds: no form predicted the held-out tails better than freezing the motion")
+    report.update(choice="rigid", scores={"rigid": [0.3, 0.29, 0.27]}, future="integrate")
+    (tmp_path / "motion_form.json").write_text(json.dumps(report))
+    assert motion_form_line(tmp_path) == ("motion form: rigid (tail scores 0.30 / 0.29 / 0.27; 1 = freezing); the "
+                                          "motion is integrated past the window")

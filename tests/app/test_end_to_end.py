@@ -132,6 +132,10 @@ def test_cli_train_eval_render_export(tmp_path):
     form = json.loads((run / "motion_form.json").read_text())
     assert form["choice"] in form["scores"] or not form["scores"]
     assert load_config(run / "config.toml").model.patterns in ("mlp", "rigid", "harmonic")
+    # The user is told what was chosen, and whether the future holds.
+    said = "holds" if form["future"] == "hold" else "integrated past the window"
+    assert f"motion form: {form['choice']}" in result.output and said in result.output
+    assert load_config(run / "config.toml").model.future == form["future"]
 
     result = runner.invoke(app, ["eval", str(run), "--split", "both"])
     assert result.exit_code == 0, result.output
