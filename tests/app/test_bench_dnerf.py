@@ -11,9 +11,14 @@ from velogauss.cli import app
 
 
 def _run(folder, psnr, ssim, lpips, gaussians, seconds, peak_mib=None):
+    """A run whose two test frames score psnr ± 1 (mean psnr), and whose val frame scores 0: the
+    table reads the test frames alone."""
     folder.mkdir(parents=True)
-    mean = {"psnr": psnr, "ssim": ssim, "lpips_alex": 0.5, "lpips_vgg": lpips}
-    (folder / "metrics.json").write_text(json.dumps({"splits": {"interpolation": {"count": 20, "mean": mean}}}))
+    frames = [{"path": f"/d/test/r_00{k}.png", "psnr": psnr + d, "ssim": ssim, "lpips_alex": 0.5, "lpips_vgg": lpips}
+              for k, d in ((0, -1.0), (1, 1.0))]
+    frames.append({"path": "/d/val/r_000.png", "psnr": 0.0, "ssim": 0.0, "lpips_alex": 9.0, "lpips_vgg": 9.0})
+    split = {"count": 3, "mean": {"psnr": 0.0}, "frames": frames}
+    (folder / "metrics.json").write_text(json.dumps({"splits": {"interpolation": split}}))
     last = {"iteration": 3000, "n_gaussians": gaussians, "elapsed_s": seconds}
     if peak_mib is not None:
         last["peak_rss_mib"] = peak_mib
