@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from velogauss.bench.harness import markdown_cell
 from velogauss.io_utils import write_text
 
 SCENES = ("bouncingballs", "hellwarrior", "hook", "jumpingjacks", "lego", "mutant", "standup", "trex")
@@ -39,8 +40,10 @@ ABLATIONS = ("full", "deform-only")
 # D-NeRF's test frames live in this folder of the scene (transforms_test.json's file paths).
 TEST_FOLDER = "test"
 # Columns of one ablation: (key, header, decimals).
-COLUMNS = (("psnr", "PSNR", 2), ("ssim", "SSIM", 4), ("lpips", "LPIPS", 4), ("gaussians", "Gaussians", 0),
-           ("minutes", "train min", 1), ("peak_gb", "peak GB", 2))
+COLUMNS = (("psnr", "PSNR", "{:.2f}"), ("ssim", "SSIM", "{:.4f}"), ("lpips", "LPIPS", "{:.4f}"),
+           ("gaussians", "Gaussians", "{:,.0f}"), ("minutes", "train min", "{:.1f}"), ("peak_gb", "peak GB", "{:.2f}"))
+# The published figures' cells: PSNR, SSIM, LPIPS.
+PUBLISHED_FORMATS = ("{:.2f}", "{:.4f}", "{:.4f}")
 
 
 def run_row(run_dir):
@@ -77,13 +80,13 @@ def markdown(rows):
     lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 1)]
     complete = [s for s in SCENES if all(rows[s, a] is not None for a in ABLATIONS)]
     for scene in SCENES:
-        cells = [_cell(None if rows[scene, a] is None else rows[scene, a][k], d) for a in ABLATIONS
+        cells = [markdown_cell(None if rows[scene, a] is None else rows[scene, a][k], d) for a in ABLATIONS
                  for k, _, d in COLUMNS]
-        cells += [_cell(v, d) for name in PUBLISHED for v, d in zip(PUBLISHED[name][scene], (2, 4, 4))]
+        cells += [markdown_cell(v, d) for name in PUBLISHED for v, d in zip(PUBLISHED[name][scene], PUBLISHED_FORMATS)]
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
-    means = [_cell(_mean([rows[s, a][k] for s in complete]), d) for a in ABLATIONS for k, _, d in COLUMNS]
-    means += [_cell(_mean([PUBLISHED[name][s][i] for s in complete]), d) for name in PUBLISHED
-              for i, d in zip(range(3), (2, 4, 4))]
+    means = [markdown_cell(_mean([rows[s, a][k] for s in complete]), d) for a in ABLATIONS for k, _, d in COLUMNS]
+    means += [markdown_cell(_mean([PUBLISHED[name][s][i] for s in complete]), d) for name in PUBLISHED
+              for i, d in enumerate(PUBLISHED_FORMATS)]
     lines.append(f"| **mean** ({len(complete)} scenes) | " + " | ".join(means) + " |")
     return "\n".join(lines) + "\n"
 
@@ -105,6 +108,3 @@ def _mean(values):
     values = [v for v in values if v is not None]
     return float(np.mean(values)) if values else None
 
-
-def _cell(value, decimals):
-    return "—" if value is None else f"{value:,.{decimals}f}" if decimals == 0 else f"{value:.{decimals}f}"

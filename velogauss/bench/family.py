@@ -30,6 +30,7 @@ from typing import get_args
 import numpy as np
 import tomli_w
 
+from velogauss.bench.harness import markdown_cell
 from velogauss.io_utils import write_text
 from velogauss.scenes.family import KINDS, REPORT_SEEDS, TUNING_SEEDS, make_random_scene
 from velogauss_core.motion import Ablation
@@ -242,7 +243,7 @@ def markdown(out, rows, missing):
              "", "## Scenes", "", _row(headers), "|---:|---|---|" + "---:|" * (2 + len(COLUMNS)) + "---|"]
     for r in rows:
         lines.append(_row([r["seed"], ", ".join(r["kinds"]), r["rig"], r["px"], r["frames"],
-                           *(_cell(r[k], fmt) for k, _, fmt in COLUMNS), r["form"] or "—"]))
+                           *(markdown_cell(r[k], fmt) for k, _, fmt in COLUMNS), r["form"] or "—"]))
     lines += ["", "## Distribution", "",
               f"Percentiles by numpy.percentile, method=\"{PERCENTILE_METHOD}\" (linear interpolation between "
               "the order statistics). p90: the value 90 % of the scenes do at least as well as (the 90th "
@@ -252,20 +253,16 @@ def markdown(out, rows, missing):
     for name, members in groups(rows):
         for key, label, better in SPREAD:
             n, *stats = spread([r[key] for r in members], better)
-            lines.append(_row([name, label, n, *(_cell(s, "{:.3f}") for s in stats)]))
+            lines.append(_row([name, label, n, *(markdown_cell(s, "{:.3f}") for s in stats)]))
     lines += ["", "## Targets", "", _row(["target", "value", "status"]), "|---|---:|---|"]
     for label, value, status in targets(rows):
-        lines.append(_row([label, _cell(value, "{:d}" if isinstance(value, int) else "{:.3f}"), status]))
+        lines.append(_row([label, markdown_cell(value, "{:d}" if isinstance(value, int) else "{:.3f}"), status]))
     lines += ["", "## Missing runs", ""] + ([f"- {m} (no metrics.json)" for m in missing] or ["none"])
     return "\n".join(lines) + "\n"
 
 
 def _row(cells):
     return "| " + " | ".join(str(c) for c in cells) + " |"
-
-
-def _cell(value, fmt):
-    return "—" if value is None else fmt.format(value)
 
 
 def table(out, write=None):

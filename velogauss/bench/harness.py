@@ -26,6 +26,11 @@ def timed_passes(step: Callable[[], object], repeats: int) -> list[float]:
     return times
 
 
+def markdown_cell(value, fmt):
+    """A table cell of the benchmarks' Markdown: `fmt.format(value)`, "—" for a value not measured."""
+    return "—" if value is None else fmt.format(value)
+
+
 def reset_peak_memory(device):
     """Start a peak-memory measurement; returns the baseline (resident KiB, CUDA bytes).
 
