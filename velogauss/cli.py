@@ -126,8 +126,10 @@ def train_command(
         None, help=f"Comma-separated effects the motion model may use: {','.join(EFFECTS)}; or `declared`, the "
                    "scene's own (scene.json). Default: all but oscillation, whatever the scene declares."),
     ablation: Optional[Ablation] = typer.Option(None, help="Which of the paper's components to switch off."),
-    iterations: Optional[int] = typer.Option(None, help="Training iterations; the schedule's \"auto\" keys (warm-up, "
-                                                         "curriculum, physics ramp, densification) scale with them."),
+    iterations: Optional[int] = typer.Option(None, help="Training iterations (default: 3000 x train.views over the views "
+                                                         "an iteration finds, 9000 for monocular video); the schedule's "
+                                                         "\"auto\" keys (warm-up, curriculum, physics ramp, "
+                                                         "densification) scale with them."),
     resume: bool = typer.Option(
         False, "--resume", help="Continue the run in --out from its latest checkpoint; only train.iterations, "
                                  "train.device, train.threads, train.eval_every, train.checkpoint_every and data.dir "

@@ -163,8 +163,10 @@ class ModelConfig(NetworkSizes, _ModelChoices):
 class TrainConfig:
     """Optimisation schedule (3DGS-style learning rates, see velogauss.train.optim)."""
 
-    iterations: Count = 3000
-    """The length of every benchmarked run (SCHEDULE_ITERATIONS)"""
+    iterations: Union[Literal["auto"], Count] = "auto"
+    """The run's length; "auto": SCHEDULE_ITERATIONS (every benchmarked run's) times train.views over the
+    views an iteration finds (frames of one time), so that a monocular video renders as many training views
+    as a multi-view one (velogauss.train.sampling.auto_iterations)."""
     seed: _int(ge=0) = 0
     """Of NumPy's and torch's generators; NumPy refuses negative seeds"""
     device: str = "cpu"
@@ -336,11 +338,13 @@ CHOSEN_KEYS = ("patterns", "effects", "mixing_init", "future")
 
 
 def resolve_from_run(cfg, saved):
-    """`cfg` with its "auto" keys (the schedule's, the transport weight and the backtest's
-    CHOSEN_KEYS) set to the values of `saved`, the config of an existing run: what `cfg` means
+    """`cfg` with its "auto" keys (train.iterations, the schedule's, the transport weight and the
+    backtest's CHOSEN_KEYS) set to the values of `saved`, the config of an existing run: what `cfg` means
     for that run when `--resume` or a sweep continues it."""
     chosen = {key: getattr(saved.model, key) for key in CHOSEN_KEYS if getattr(cfg.model, key) == "auto"}
     cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, **chosen))
+    if cfg.train.iterations == "auto":
+        cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, iterations=saved.train.iterations))
     return resolve_transport(resolve_schedule(cfg, saved), None, saved)
 
 
@@ -348,7 +352,11 @@ def resolve_schedule(cfg, saved=None):
     """`cfg` with each "auto" key of SCHEDULE replaced by a number of iterations: the value the
     config `saved` holds (the run being resumed keeps its schedule), else its SCHEDULE value
     times `cfg.train.iterations / SCHEDULE_ITERATIONS`, rounded, intervals to at least 1.
-    Keys set to a number are kept as they are."""
+    Keys set to a number are kept as they are. `cfg.train.iterations` must be a number (the
+    training resolves "auto" first, velogauss.train.sampling.auto_iterations)."""
+    if cfg.train.iterations == "auto":
+        raise ValueError('train.iterations is "auto": the schedule scales with a number of iterations, which the '
+                         'training resolves from the data first (velogauss.train.sampling.auto_iterations)')
     changes = {}
     saved = resolve_schedule(saved) if saved is not None else None
     for name, value in SCHEDULE.items():

@@ -124,13 +124,19 @@ def test_cli_bad_grid_is_one_error_line(tmp_path):
     assert result.exit_code == 2 and "out" in result.output
 
 
+def _as_a_run_writes(cfg):
+    """`cfg` with train.iterations a number, as a run's config.toml holds it (the toss, filmed by
+    more cameras than train.views at every time, resolves "auto" to 3,000)."""
+    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, iterations=3000))
+
+
 def test_resume_plan_skips_done_points_and_never_overwrites_another_config(tmp_path):
     sweep = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']\nseeds = [0, 1]"))
     first, second = sweep.points
     assert plan_point(first, None, tmp_path).action == "train"
     run = tmp_path / first.name
     run.mkdir()
-    cfg = point_config(first, None, tmp_path / "data" / "toss")
+    cfg = _as_a_run_writes(point_config(first, None, tmp_path / "data" / "toss"))
     (run / "config.toml").write_text(to_toml(cfg))
     assert plan_point(first, None, tmp_path).action == "train"  # killed before its first checkpoint
     (run / "checkpoints").mkdir()
@@ -152,7 +158,7 @@ def test_a_finished_point_on_a_scene_with_its_own_window_and_background_is_skipp
     and a grid that sets another max_time must still be refused."""
     sweep = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']"))
     (point,) = sweep.points
-    cfg = point_config(point, None, tmp_path / "data" / "toss")
+    cfg = _as_a_run_writes(point_config(point, None, tmp_path / "data" / "toss"))
     own = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, max_time=0.7368, background=(0.0, 0.0, 0.0)))
     run = tmp_path / point.name
     run.mkdir()
@@ -173,7 +179,7 @@ def test_a_finished_point_with_the_default_form_is_skipped(tmp_path):
     gravity); planning the same grid again must see the same config and skip it."""
     sweep = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']"))
     (point,) = sweep.points
-    cfg = point_config(point, None, tmp_path / "data" / "toss")
+    cfg = _as_a_run_writes(point_config(point, None, tmp_path / "data" / "toss"))
     assert cfg.model.patterns == "auto"
     chosen = dataclasses.replace(cfg, model=dataclasses.replace(
         cfg.model, patterns="rigid", mixing_init="uniform", effects=("translation", "rotation", "static")))

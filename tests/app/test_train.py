@@ -22,7 +22,7 @@ from velogauss.train import loop
 from velogauss.train.checkpoint import CHECKPOINT_FORMAT, checkpoint_path, load_checkpoint, load_model
 from velogauss.train.densify import DensityStats, cap_at, densify_and_prune
 from velogauss.train.optim import make_optimizer
-from velogauss.train.sampling import FrameSampler
+from velogauss.train.sampling import FrameSampler, auto_iterations, views_per_iteration
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss.visualize import render_run
 from velogauss_fast.motion.code import physics_code
@@ -74,6 +74,48 @@ def test_views_of_a_step_share_one_time_and_differ_in_camera():
     views = sampler.sample_views(5, rng, 9)
     assert sorted(views) == list(np.flatnonzero(times == times[views[0]]))
     assert len(sampler.sample_views(5, rng, 1)) == 1
+
+
+def test_the_auto_budget_renders_as_many_views_as_a_multiview_run():
+    """spec/density.md, "The iteration budget": 3,000 x views / (mean views an iteration finds)."""
+    multiview = np.repeat([0.0, 0.25, 0.5], 4)  # 4 cameras per time
+    monocular = np.linspace(0.0, 1.0, 50)  # D-NeRF: one camera per time
+    mixed = [0.0, 0.0, 0.5, 0.5, 0.5, 1.0]  # frames with 2, 2, 3, 3, 3 and 1 views at views = 3
+    assert views_per_iteration(multiview, 3) == 3 and auto_iterations(multiview, 3) == 3000
+    assert views_per_iteration(monocular, 3) == 1 and auto_iterations(monocular, 3) == 9000
+    assert views_per_iteration(mixed, 3) == pytest.approx(14 / 6)
+    assert auto_iterations(mixed, 3) == round(3000 * 3 / (14 / 6)) == 3857
+    assert auto_iterations(np.repeat([0.0, 0.5], 2), 3) == 4500
+    assert auto_iterations(monocular, 1) == 3000  # one view asked, one found
+    assert auto_iterations(monocular, 3, moving=False) == 3000  # a still scene's frames all go together
+
+
+def test_the_default_scene_keeps_the_budget_every_benchmark_measured(tmp_path):
+    """The main job's scene films every time with more cameras than train.views: 3,000, as before."""
+    from velogauss.scenes import DEFAULT_SCENE
+
+    make_scene(DEFAULT_SCENE, tmp_path / "scene", resolution=16)
+    scene = load_scene(tmp_path / "scene")
+    assert auto_iterations([f.time for f in scene.train], load_config().train.views) == 3000
+
+
+def test_the_auto_budget_is_recorded_and_kept_on_resume(tiny_scene, tmp_path, monkeypatch):
+    """train.iterations "auto" becomes a number from the training frames (the tiny toss: 3
+    training cameras at every time, so 3,000 at 3 views and 9,000 at one camera's worth), which
+    config.toml records and a resume with "auto" keeps."""
+    # A stand-in for the 3,000 of every benchmarked run, so that the tiny scene trains in seconds.
+    monkeypatch.setattr("velogauss.train.sampling.SCHEDULE_ITERATIONS", 4)
+    auto = [item for item in TINY if item.split("=")[0] not in SCHEDULE and item.split("=")[0] != "train.iterations"]
+    assert load_config(None, auto).train.iterations == "auto"
+    loop.train(load_config(None, auto + ["train.views=2"]), tiny_scene, tmp_path / "multi", progress=False)
+    assert load_config(tmp_path / "multi" / "config.toml").train.iterations == 4
+    first = tiny_scene.train[0].camera.viewmat
+    monocular = dataclasses.replace(tiny_scene, train=[f for f in tiny_scene.train
+                                                       if np.array_equal(f.camera.viewmat, first)])
+    loop.train(load_config(None, auto + ["train.views=2"]), monocular, tmp_path / "mono", progress=False)
+    assert load_config(tmp_path / "mono" / "config.toml").train.iterations == 8
+    loop.train(load_config(None, auto + ["train.views=2"]), monocular, tmp_path / "mono", resume=True, progress=False)
+    assert load_config(tmp_path / "mono" / "config.toml").train.iterations == 8
 
 
 @pytest.mark.parametrize("iterations, resets", [(12, []), (16, [8])])

@@ -50,7 +50,7 @@ from velogauss.train.mixing import resolve_mixing_init, separate_patterns
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train import aux_losses, aux_worker
 from velogauss.train.adf_backward_thread import adf_evaluation
-from velogauss.train.sampling import FrameSampler, camera_extent
+from velogauss.train.sampling import FrameSampler, auto_iterations, camera_extent
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss.train.targets import TrainingTargets
 from velogauss_fast.backends import numba_backend
@@ -102,8 +102,9 @@ def prepare(cfg, data, run_dir, resume=False, progress=False):
     Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `trainer.step(it)`
     and `trainer.adapt_gaussians(it + 1)` then run iteration `it` (the contention benchmark
     times them).
-    The schedule's "auto" keys and the transport weight's are resolved here
-    (`resolve_schedule`, `resolve_transport`): for a new run from `train.iterations` and the
+    The "auto" keys of the run's length, its schedule and the transport weight are resolved here
+    (`auto_iterations`, `resolve_schedule`, `resolve_transport`): for a new run from the
+    training frames' times, `train.iterations` and the
     motion patterns of the scene's spec, on resume to the run's own values; `trainer.cfg` and config.toml
     hold the numbers used. `cfg.data.max_time` becomes the loaded scene's `max_time`: under a
     "future:F" `cfg.data.split` the window's end that split derived, under "time" a generated
@@ -139,6 +140,10 @@ def prepare(cfg, data, run_dir, resume=False, progress=False):
     else:
         # model.patterns "auto": a short probe's Gaussian paths choose the form (and the mixing's start).
         report = None
+        if cfg.train.iterations == "auto":
+            iterations = auto_iterations([f.time for f in data.train], cfg.train.views,
+                                         scene_spec(cfg, data.metadata).moving)
+            cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, iterations=iterations))
         if selects_form(cfg):
             cfg, report = choose_form(cfg, data, train, progress)
         cfg = resolve_schedule(cfg)

@@ -14,6 +14,8 @@ time (`physics.placement = "gaussians"`) or uniform over the scene box grown by 
 import numpy as np
 import torch
 
+from velogauss.config import SCHEDULE_ITERATIONS
+
 
 class FrameSampler:
     """Draws training frame indices by the curriculum of the module docstring.
@@ -50,6 +52,26 @@ class FrameSampler:
         others = np.flatnonzero(same & (np.arange(len(self.times)) != first))
         extra = rng.choice(others, size=min(views - 1, len(others)), replace=False) if views > 1 else []
         return [first, *(int(i) for i in extra)]
+
+
+def views_per_iteration(times, views, moving=True):
+    """The mean number of frames `FrameSampler.sample_views` returns for `views` over the
+    training frames' `times` (F,): each frame is drawn as often, with up to `views` - 1 others
+    of exactly its time (any others when the scene does not move)."""
+    times = np.asarray(times, dtype=np.float64)
+    if not moving:
+        return float(min(views, len(times)))
+    _, inverse, counts = np.unique(times, return_inverse=True, return_counts=True)
+    return float(np.minimum(views, counts[inverse]).mean())
+
+
+def auto_iterations(times, views, moving=True):
+    """`train.iterations = "auto"`: SCHEDULE_ITERATIONS x `views` / `views_per_iteration`,
+    rounded: as many rendered training views as a run of SCHEDULE_ITERATIONS that finds every
+    view it asks for. A scene filmed by `views` or more cameras at each time keeps
+    SCHEDULE_ITERATIONS; monocular video (one camera per time, as D-NeRF's) gets `views` times
+    as many iterations (spec/density.md, "The iteration budget")."""
+    return max(1, round(SCHEDULE_ITERATIONS * views / views_per_iteration(times, views, moving)))
 
 
 def collocation_points(bounds, margin, n_points, rng, dtype, device):
