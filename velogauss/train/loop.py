@@ -138,12 +138,12 @@ def prepare(cfg, data, run_dir, resume=False, progress=False):
         # The checkpoint and config.toml stay one truth: the changes check_resume_config allows.
         write_text(run_dir / "config.toml", to_toml(cfg))
     else:
-        # model.patterns "auto": a short probe's Gaussian paths choose the form (and the mixing's start).
-        report = None
         if cfg.train.iterations == "auto":
             iterations = auto_iterations([f.time for f in data.train], cfg.train.views,
                                          scene_spec(cfg, data.metadata).moving)
             cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, iterations=iterations))
+        # model.patterns "auto": a short probe's Gaussian paths choose the form (and the mixing's start).
+        report = None
         if selects_form(cfg):
             cfg, report = choose_form(cfg, data, train, progress)
         cfg = resolve_schedule(cfg)
