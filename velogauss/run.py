@@ -220,8 +220,9 @@ def motion_form_line(run_dir):
     report = json.loads(path.read_text())
     scores = report.get("scores", {}).get(report["choice"])
     scored = "" if not scores else " (tail scores " + " / ".join(f"{x:.2f}" for x in scores) + "; 1 = freezing)"
-    future = ("the future holds: no form predicted the held-out tails better than freezing the motion"
-              if report.get("future") == "hold" else "the motion is integrated past the window")
+    future = {"hold": "the future holds: no form predicted the held-out tails better than freezing the motion",
+              "coast": "the motion coasts past the window: its patterns keep their value at the window's end"}.get(
+        report.get("future"), "the motion is integrated past the window")
     return f"motion form: {report['choice']}{scored}; {future}"
 
 

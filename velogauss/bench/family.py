@@ -15,7 +15,7 @@ metrics.json (`velogauss.evaluate.evaluate_model`'s result) into one row per sce
 - the deform-only run's extrapolation PSNR: what the velocity field buys over a deformation
   network alone;
 - the run folder's `motion_form.json` `choice` (`model.patterns = "auto"`), when written, marked
-  "(held)" when its `future` is "hold".
+  "(held)" when its `future` is "hold", "(coast)" when "coast".
 
 Then the distributions (over all scenes, and per kind of motion: a scene counts under each
 kind of its moving bodies) and the targets, met or missed. Runs of `ABLATIONS` that have not
@@ -38,6 +38,8 @@ from velogauss_core.motion import Ablation
 SEED_LISTS = {"tuning": TUNING_SEEDS, "report": REPORT_SEEDS}
 # The defaults, and a model without a velocity field: the gap between them is what the physics buys.
 ABLATIONS = ("full", "deform-only")
+# The form column's mark of a run's future other than the form's own law (model.future).
+FUTURE_LABELS = {"hold": " (held)", "coast": " (coast)"}
 # One training seed per scene: the spread studied is the scenes', not the optimiser's.
 RUN_SEED = 0
 # numpy.percentile's method: linear interpolation between the order statistics.
@@ -174,7 +176,7 @@ def scene_row(scene, full_run, deform_run):
     form_file = full_run / "motion_form.json"
     report = json.loads(form_file.read_text()) if form_file.is_file() else {}
     # A held future (no form beat freezing, model.future "auto") is part of what the run chose.
-    form = None if "choice" not in report else report["choice"] + (" (held)" if report.get("future") == "hold" else "")
+    form = None if "choice" not in report else report["choice"] + FUTURE_LABELS.get(report.get("future"), "")
     return {"seed": scene["family"]["seed"], "kinds": tuple(params["kinds"]), "rig": params["rig"],
             "px": scene["generator"]["resolution"][0], "frames": scene["generator"]["n_times"],
             "vel_obs": _at(metrics, "motion", "velocity", "observed", "relative_l2"),

@@ -68,7 +68,10 @@ def motion_patterns(params, t, cfg):
 
 
 def motion_patterns_at(params, times, cfg):
-    """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them."""
+    """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them.
+    Under cfg.future "coast" a time past cfg.max_time reads P(max_time) (VG-COEF-COAST)."""
+    if cfg.future == "coast":
+        times = times.clamp(max=cfg.max_time)
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns(params["time"], times[:, None, None], cfg.max_time)
     if cfg.pattern_form == "harmonic":

@@ -48,8 +48,11 @@ def motion_patterns(params, t, cfg):
 
     gamma with cfg.n_freqs_t frequencies (0: raw t, which does not repeat periodically
     into the future); K = cfg.n_patterns. The rigid bodies of VG-COEF-RIGID under
-    cfg.pattern_form "rigid", the oscillators of VG-COEF-HARM under "harmonic".
+    cfg.pattern_form "rigid", the oscillators of VG-COEF-HARM under "harmonic". Under
+    cfg.future "coast" a t past cfg.max_time reads P(max_time) (VG-COEF-COAST).
     """
+    if cfg.future == "coast":
+        t = np.minimum(t, cfg.max_time)
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns(params["time"], t, cfg.max_time)
     if cfg.pattern_form == "harmonic":

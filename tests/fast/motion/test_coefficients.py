@@ -17,16 +17,16 @@ from velogauss_ref.motion import coefficients as ref
 times = st.sampled_from([0.0, 0.37, 1.0, -2.5, 6.0])
 
 
-@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID", "VG-COEF-HARM")
+@pytest.mark.spec("VG-COEF", "VG-COEF-RIGID", "VG-COEF-HARM", "VG-COEF-COAST")
 @DEVICE_SETTINGS
 @given(seed=st.integers(0, 2**32 - 1), t=times, n_freqs_t=st.integers(0, 2), masked=st.booleans(),
        n=st.sampled_from([0, 1, 6]), pattern_form=st.sampled_from(["mlp", "rigid", "harmonic"]),
-       knots=st.sampled_from([2, 3]))
-def test_reference_vs_fast(device, seed, t, n_freqs_t, masked, n, pattern_form, knots):
+       knots=st.sampled_from([2, 3]), future=st.sampled_from(["integrate", "coast"]))
+def test_reference_vs_fast(device, seed, t, n_freqs_t, masked, n, pattern_form, knots, future):
     # pattern_form "rigid" or "harmonic": VG-COEF-RIGID's or VG-COEF-HARM's patterns
-    # (n_freqs_t does not enter them).
+    # (n_freqs_t does not enter them); future "coast" reads them at min(t, 0.6) (VG-COEF-COAST).
     cfg = small_cfg(n_freqs_t=n_freqs_t, mask=RIGID_MASK if masked else None, pattern_form=pattern_form,
-                    max_time=0.6, rigid_knots=knots)
+                    max_time=0.6, rigid_knots=knots, future=future)
     params = random_params(seed, cfg)
     z = np.random.default_rng(seed).standard_normal((n, cfg.code_dim))
     args = (params, t, z, cfg)

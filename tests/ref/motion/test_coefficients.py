@@ -11,7 +11,7 @@ from tests.ref.motion.cases import FD_STEP, RIGID_MASK, TRANSLATION_MASK, flat_p
 from velogauss_ref.motion import coefficients as coef_module
 from velogauss.scenes.trajectories import PeriodicFlowMotion, RigidMotion
 from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
-                                              rigid_velocity_patterns)
+                                              motion_patterns, rigid_velocity_patterns)
 from velogauss_ref.nn import mlp, positional_encoding
 
 seeds = st.integers(0, 2**32 - 1)
@@ -97,6 +97,36 @@ def test_mask_zeroes_exactly_the_unselected_columns(mask):
 def test_coefficients_gradient(masked, seed, t, z, n_freqs_t, pattern_form):
     cfg = small_cfg(mask=RIGID_MASK if masked else None, n_freqs_t=n_freqs_t, pattern_form=pattern_form,
                     max_time=0.75)
+    theta, unflatten = flat_params(random_params(seed, cfg))
+    check_grads_fd(lambda theta, t, z: coefficients(unflatten(theta), t, z, cfg), (theta, t, z), (0, 1, 2),
+                   np.random.default_rng(seed), step=FD_STEP)
+
+
+@pytest.mark.spec("VG-COEF-COAST")
+@given(seed=seeds, t=st.floats(-3, 3), pattern_form=st.sampled_from(["mlp", "rigid", "harmonic"]))
+def test_coasting_patterns_keep_their_value_at_the_window_s_end(seed, t, pattern_form):
+    # P(min(t, T)) through each form's own public function (tested above), exactly: inside the
+    # window the coasting patterns are VG-COEF's to the bit, past it they stay at T's.
+    max_time = 0.6
+    coast = small_cfg(pattern_form=pattern_form, max_time=max_time, future="coast")
+    params = random_params(seed, coast)
+    tau = min(t, max_time)
+    if pattern_form == "rigid":
+        expected = rigid_velocity_patterns(params["time"], tau, max_time)
+    elif pattern_form == "harmonic":
+        expected = harmonic_velocity_patterns(*params["time"][0], tau)
+    else:
+        expected = _patterns(params, tau, coast)
+    np.testing.assert_array_equal(motion_patterns(params, t, coast), expected)
+
+
+@pytest.mark.spec("VG-COEF-COAST")
+@given(seed=seeds, t=st.one_of(st.floats(-3, 0.7), st.floats(0.8, 3)),
+       z=hnp.arrays(np.float64, (3, 3), elements=st.floats(-2, 2)),
+       pattern_form=st.sampled_from(["mlp", "rigid", "harmonic"]))
+def test_coasting_coefficients_gradient(seed, t, z, pattern_form):
+    # Probes stay 0.05 from T = 0.75, where dw/dt jumps to 0.
+    cfg = small_cfg(pattern_form=pattern_form, max_time=0.75, future="coast")
     theta, unflatten = flat_params(random_params(seed, cfg))
     check_grads_fd(lambda theta, t, z: coefficients(unflatten(theta), t, z, cfg), (theta, t, z), (0, 1, 2),
                    np.random.default_rng(seed), step=FD_STEP)

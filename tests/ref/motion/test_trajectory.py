@@ -9,9 +9,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.ref.gradcheck import check_grads_fd
-from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, constant_coefficient_params, flat_outputs, flat_params,
-                                    random_params, small_cfg)
+from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, TRANSLATION_MASK, constant_coefficient_params, flat_outputs,
+                                    flat_params, random_params, small_cfg)
+from velogauss_ref.motion.coefficients import coefficients
 from velogauss_ref.motion.trajectory import base_state
+from velogauss_ref.motion.velocity import velocity
 from velogauss_ref.quaternion import quat_multiply, quat_to_rotmat
 
 seeds = st.integers(0, 2**32 - 1)
@@ -148,3 +150,25 @@ def test_bad_input_names_the_argument(change, name):
     args = {**dict(x0=x0, q0=q0, s0=s0, z=z, t=0.5, h=0.1, method="rk2"), **change}
     with pytest.raises(ValueError, match=f"^{name}:"):
         base_state(random_params(0, cfg), cfg=cfg, **args)
+
+
+@pytest.mark.spec("VG-COEF-COAST")
+@given(seed=seeds, t=st.floats(0.3, 2.0), method=st.sampled_from(["euler", "rk2"]))
+def test_coasting_integrates_on_in_the_field_of_the_window_s_last_patterns(seed, t, method):
+    # Translation only: the field is uniform in x, so each step adds dt times the velocity at
+    # its stage time (Euler: the step's start; midpoint RK2: its middle), read at
+    # min(stage time, T) through VG-COEF's coefficients and VG-VEL; T = 0.6.
+    T, h = 0.6, 0.05
+    coast = small_cfg(mask=TRANSLATION_MASK, max_time=T, future="coast")
+    window = small_cfg(mask=TRANSLATION_MASK, max_time=T)
+    rng = np.random.default_rng(seed)
+    params = random_params(seed, coast)
+    x0, z = rng.standard_normal((5, 3)), rng.standard_normal((5, coast.code_dim))
+    q0, s0 = rng.standard_normal((5, 4)), rng.uniform(0.5, 2.0, (5, 3))
+    n = math.ceil(t / h)
+    dt = t / n
+    stage = {"euler": 0.0, "rk2": 0.5}[method]
+    expected = x0 + sum(dt * velocity(x0, coefficients(params, min(k * dt + stage * dt, T), z, window))
+                        for k in range(n))
+    x, _, _ = base_state(params, x0, q0, s0, z, t, h, method, coast)
+    np.testing.assert_allclose(x, expected, rtol=0, atol=1e-12)
