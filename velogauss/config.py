@@ -113,9 +113,9 @@ class _ModelChoices:
     future: Literal["auto", "integrate", "coast", "hold"] = "auto"
     """Past the observed window: "integrate" carries the motion on; "coast" carries it on with the motion
     patterns kept at their value at the window's end (the velocity's persistence forecast); "hold" keeps every
-    Gaussian where it is at the window's end (the position's); "auto": what the backtest of `patterns = "auto"`
-    found to predict the held-out end of the window best, "hold" when nothing beat freezing it, "integrate"
-    without a backtest (spec/motion.md, "The future past the window")."""
+    Gaussian where it is at the window's end (the position's); "auto": "hold" when the backtest of
+    `patterns = "auto"` found no form that predicts the held-out end of the window better than freezing it,
+    else "integrate" (spec/motion.md, "The future past the window")."""
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     """How the mixing weights start: "uniform", "clusters" (one k-means region per pattern,
     velogauss.train.mixing) or "auto": clusters when the backtest's probe found still Gaussians beside

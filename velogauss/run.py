@@ -217,12 +217,8 @@ def motion_form_line(run_dir):
     path = Path(run_dir) / "motion_form.json"
     if not path.is_file():
         return None
-    from velogauss.train.backtest import COAST
-
     report = json.loads(path.read_text())
-    # A coasting time network shows the tail scores of its coasting forecast.
-    row = COAST if report.get("future") == "coast" else report["choice"]
-    scores = report.get("scores", {}).get(row)
+    scores = report.get("scores", {}).get(report["choice"])
     scored = "" if not scores else " (tail scores " + " / ".join(f"{x:.2f}" for x in scores) + "; 1 = freezing)"
     future = {"hold": "the future holds: no form predicted the held-out tails better than freezing the motion",
               "coast": "the motion coasts past the window: its patterns keep their value at the window's end"}.get(

@@ -11,7 +11,7 @@ import torch
 from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.scenes import make_scene
-from velogauss.train.backtest import (CANDIDATES, COAST, backtest, candidate_spec, candidates, choose_form, choose_future,
+from velogauss.train.backtest import (CANDIDATES, backtest, beats_freezing, candidate_spec, candidates, choose_form,
                                       harmonic_fit, origins, probe_config, rigid_fit, select)
 from velogauss.train.frequency import series_frequency
 from velogauss_core.constants import BACKTEST_HEADS, FREQ_SCAN_STEP
@@ -117,7 +117,7 @@ def test_the_paths_frequency_is_the_oscillation_s(cycles):
 def test_the_backtest_prefers_the_form_the_paths_were_made_with(paths, expected):
     cfg = load_config(None, SMALL)
     scores = backtest(TIMES, paths, cfg, np.random.default_rng(0))
-    assert list(scores) == [*CANDIDATES, COAST] and all(len(row) == len(origins(TIMES)) for row in scores.values())
+    assert list(scores) == list(CANDIDATES) and all(len(row) == len(origins(TIMES)) for row in scores.values())
     assert select(scores) in expected
     # The winner's tail error is at most half of freezing the motion at the head's end (1);
     # the pulse's field, (ds/dt) / s, is an oscillation only to first order in its amplitude.
@@ -140,25 +140,11 @@ def test_a_richer_form_is_chosen_only_when_it_predicts_better_at_every_origin():
 
 def test_the_future_holds_when_no_form_beats_freezing():
     # The mean score of the choice decides, as for the choice itself.
-    assert choose_future({"rigid": [0.9, 1.05], "mlp": [1.1, 1.4]}, "rigid") == "integrate"
-    scores = {"rigid": [0.9, 1.2], "harmonic": [1.5, 1.3], "mlp": [1.1, 1.4], COAST: [1.0, 1.2]}
-    assert select(scores) == "mlp" and choose_future(scores, "mlp") == "hold"
+    assert beats_freezing({"rigid": [0.9, 1.05], "mlp": [1.1, 1.4]}, "rigid")
+    scores = {"rigid": [0.9, 1.2], "harmonic": [1.5, 1.3], "mlp": [1.1, 1.4]}
+    assert select(scores) == "mlp" and not beats_freezing(scores, "mlp")
     # No paths to score (nothing moved, or too few times): nothing was shown to beat freezing.
-    assert choose_future({}, select({})) == "hold"
-
-
-def test_the_time_network_coasts_unless_its_own_continuation_predicts_better_at_every_origin():
-    # The rigid and oscillating forms carry their law past the window: their coasting is not scored.
-    assert choose_future({"harmonic": [0.4, 0.5], COAST: [0.1, 0.1]}, "harmonic") == "integrate"
-    # The time network: coasting, the simpler, stands where integrating wins only somewhere ...
-    assert choose_future({"mlp": [0.5, 0.9, 0.3], COAST: [0.6, 0.7, 0.8]}, "mlp") == "coast"
-    # ... and gives way where integrating predicts better at every origin.
-    assert choose_future({"mlp": [0.5, 0.6, 0.7], COAST: [0.6, 0.7, 0.8]}, "mlp") == "integrate"
-    # Either stands only below freezing on average; a choice of "mlp" among the candidates is not
-    # changed by its coasting row, which is not a candidate.
-    scores = {"rigid": [1.2, 1.3], "mlp": [1.4, 1.1], COAST: [0.8, 0.9]}
-    assert select(scores) == "mlp" and choose_future(scores, "mlp") == "coast"
-    assert choose_future({"mlp": [1.2, 1.3], COAST: [1.1, 0.95]}, "mlp") == "hold"
+    assert not beats_freezing({}, select({}))
 
 
 def test_the_origins_are_the_heads_last_times_with_a_tail_to_score():
@@ -179,8 +165,9 @@ def test_a_choice_is_written_into_the_config_and_never_read_from_the_scene(tiny_
     chosen, report = choose_form(cfg, tiny_scene, probe_run)
     assert chosen.model.patterns in {"mlp", "rigid", "harmonic"}
     assert report["choice"] in CANDIDATES and chosen.model.mixing_init in {"uniform", "clusters"}
-    # The future follows the report's scores.
-    assert chosen.model.future == report["future"] == choose_future(report["scores"], report["choice"])
+    # The future follows the report's scores: held exactly when the choice did not beat freezing.
+    assert chosen.model.future == report["future"] == ("integrate" if beats_freezing(report["scores"], report["choice"])
+                                                       else "hold")
     # A future the user set is kept.
     kept = load_config(None, [*SMALL, "train.iterations=30", "train.threads=1", "model.future=integrate"])
     assert choose_form(kept, tiny_scene, probe_run)[0].model.future == "integrate"

@@ -168,7 +168,7 @@ def test_the_command_says_what_was_chosen_and_whether_the_future_holds(tmp_path)
     (tmp_path / "motion_form.json").write_text(json.dumps(report))
     assert motion_form_line(tmp_path) == ("motion form: rigid (tail scores 0.30 / 0.29 / 0.27; 1 = freezing); the "
                                           "motion is integrated past the window")
-    report.update(choice="mlp", scores={"mlp": [0.5, 0.9, 0.3], "mlp-coast": [0.6, 0.7, 0.8]}, future="coast")
+    report.update(choice="mlp", scores={"mlp": [0.6, 0.7, 0.8]}, future="coast")  # a future the user set
     (tmp_path / "motion_form.json").write_text(json.dumps(report))
     assert motion_form_line(tmp_path) == ("motion form: mlp (tail scores 0.60 / 0.70 / 0.80; 1 = freezing); the "
                                           "motion coasts past the window: its patterns keep their value at the "

@@ -19,14 +19,10 @@ the video alone, never from a scene's name or declared effects:
    replaces the choice only when it predicts better at every origin; the choice stands when its
    mean score is below 1, else the time network. That is the run's `model.patterns` (and, for a
    drifting rigid centre, its effects without gravity); the run then trains from scratch with
-   it, as if it had been set;
-5. `choose_future`: `model.future = "auto"` becomes the chosen form's own law ("integrate") when
-   its mean score is below 1, else "hold" (the position's persistence forecast: nothing beat
-   freezing). The time network has no law past the window, so for it the backtest also scores
-   "coast" (its patterns kept at their value at the head's end: the velocity's persistence
-   forecast, `COAST`), the simpler of its two futures, which "integrate" replaces only when it
-   predicts better at every origin. config.toml records both, and the run folder's
-   `motion_form.json` holds every score.
+   it, as if it had been set. When no candidate beat freezing, `model.future = "auto"` becomes
+   "hold": past the window the run shows the persistence forecast, which the backtest found
+   best. config.toml records both, and the run folder's `motion_form.json` holds every
+   candidate's scores.
 
 The probe also says whether still Gaussians lie beside moving ones (`model.mixing_init =
 "auto"`: the mixing weights then start apart) and, for oscillators, the paths' own frequency,
@@ -65,9 +61,6 @@ CANDIDATES = {
     "harmonic": ("harmonic", None),
     "mlp": ("mlp", None),
 }
-# The time network's fit forecast with its patterns kept at the head's end (`model.future = "coast"`):
-# a future of the "mlp" candidate, scored beside the candidates, not one of them.
-COAST = "mlp-coast"
 
 
 def candidates(effects):
@@ -119,7 +112,9 @@ def choose_form(cfg, data, run, progress=False):
     choice = select(scores)
     form, effects = candidates(m.effects)[choice]
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
-    future = choose_future(scores, choice) if m.future == "auto" else m.future
+    future = m.future
+    if future == "auto":
+        future = "integrate" if beats_freezing(scores, choice) else "hold"
     model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects, future=future)
     frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
     report.update({"origins": heads, "scores": scores, "choice": choice, "future": future, "mixing_init": mixing,
@@ -170,34 +165,21 @@ def probe_paths(model, data, rng):
 
 
 def select(scores):
-    """The chosen candidate (module docstring, step 4) of `scores` {name: [score per origin]} (the
-    CANDIDATES among its keys): "mlp" when there are none or the choice's mean score is not below 1
-    (the paths show no law that predicts better than freezing the motion)."""
-    choice = _simplest_unbeaten({name: scores[name] for name in CANDIDATES if name in scores})
+    """The chosen candidate (module docstring, step 4) of `scores` {name: [score per origin]}, in
+    CANDIDATES' order: "mlp" when there are none or the choice's mean score is not below 1 (the
+    paths show no law that predicts better than freezing the motion)."""
+    choice = None
+    for name, row in scores.items():
+        if choice is None or all(a < b for a, b in zip(row, scores[choice])):
+            choice = name
     return choice if choice is not None and np.mean(scores[choice]) < 1.0 else "mlp"
 
 
-def choose_future(scores, choice):
-    """`model.future = "auto"` resolved (module docstring, step 5) for the chosen candidate `choice`
-    and the backtest's `scores`: "integrate" (the form's law) or, for the time network, "coast"
-    (`COAST`'s row), whichever is simpler unless beaten at every origin, when its mean score is
-    below 1; else "hold". Without scores (nothing moved, or no tail to hold out) nothing was shown
-    to beat freezing: "hold"."""
-    futures = {"coast": COAST, "integrate": choice} if choice == "mlp" else {"integrate": choice}
-    rows = {future: scores[name] for future, name in futures.items() if name in scores}
-    future = _simplest_unbeaten(rows)
-    return future if future is not None and np.mean(rows[future]) < 1.0 else "hold"
-
-
-def _simplest_unbeaten(rows):
-    """The key of `rows` {name: [score per origin]}, walked in order (simplest first), that no
-    later row beat at every origin before it was reached: a later row replaces the choice only
-    when it scores lower at every origin. None for no rows."""
-    choice = None
-    for name, row in rows.items():
-        if choice is None or all(a < b for a, b in zip(row, rows[choice])):
-            choice = name
-    return choice
+def beats_freezing(scores, choice):
+    """Whether the chosen candidate predicts the held-out tails better than freezing the motion:
+    its mean score below 1. Without scores (nothing moved, or no tail to hold out) nothing was
+    shown to, and the run's future holds (`model.future = "auto"`)."""
+    return choice in scores and float(np.mean(scores[choice])) < 1.0
 
 
 def origins(times):
@@ -213,22 +195,15 @@ def origins(times):
 def backtest(times, paths, cfg, rng):
     """{candidate: [tail score per origin]} (module docstring, step 3) for the paths (J, M, 3) at
     J >= 4 `times`: at each origin (`origins`) each candidate is fitted on the head, then
-    integrated from the head's last positions over the rest; and `COAST`: the "mlp" candidate's
-    fit integrated with its patterns kept at the head's end (`model.future = "coast"`)."""
+    integrated from the head's last positions over the rest."""
     scores = {name: [] for name in candidates(cfg.model.effects)}
-    scores[COAST] = []
     for last in origins(times):
         spread = np.sqrt(((paths[last + 1:] - paths[last]) ** 2).sum(-1).mean())
-
-        def score(motion, spec):
-            predicted = predict(motion, paths[0], paths[last], times[last:], spec)[1:]
-            return float(np.sqrt(((predicted - paths[last + 1:]) ** 2).sum(-1).mean()) / max(spread, 1e-12))
-
         for name, (form, effects) in candidates(cfg.model.effects).items():
             motion = fit(form, effects, times[:last + 1], paths[:last + 1], cfg, rng)
-            scores[name].append(score(motion, motion.spec))
-            if name == "mlp":
-                scores[COAST].append(score(motion, dataclasses.replace(motion.spec, future="coast")))
+            predicted = predict(motion, paths[0], paths[last], times[last:])[1:]
+            error = np.sqrt(((predicted - paths[last + 1:]) ** 2).sum(-1).mean())
+            scores[name].append(float(error / max(spread, 1e-12)))
     return scores
 
 
@@ -368,11 +343,10 @@ def _velocities(motion, x0, x, times):
     return (A * x[..., None, :]).sum(-1) + b
 
 
-def predict(motion, x0, x_start, times, spec):
-    """Positions (J, M, 3) float64 of the fitted `motion` under `spec` (its own, or with another
-    future) at `times` (J,), starting from x_start (M, 3) at times[0]; the codes are taken at x0
-    (M, 3), the paths' first positions."""
-    params = motion.params()
+def predict(motion, x0, x_start, times):
+    """Positions (J, M, 3) float64 of the fitted `motion` at `times` (J,), starting from
+    x_start (M, 3) at times[0]; the codes are taken at x0 (M, 3), the paths' first positions."""
+    params, spec = motion.params(), motion.spec
     with torch.no_grad():
         z = physics_code(params, torch.as_tensor(x0, dtype=torch.float32), spec)
         x = torch.as_tensor(x_start, dtype=torch.float32)
