@@ -221,9 +221,9 @@ TIME_HORIZON = 100.0
 # (256 x 12 x N floats: 120 MB for 10k Gaussians) instead of all of them.
 STAGE_CHUNK = 256
 # The backtest that chooses the motion patterns' form (velogauss.train.backtest, spec/motion.md,
-# "Choosing the form"). The probe, a reconstruction with the time network's patterns, trains for this share of
-# the run's iterations: its schedule then opens the whole window by a third of its length, as
-# the run's does, and the run costs a third more.
+# "Choosing the form"). The probe, a reconstruction with the time network's patterns, trains for
+# this share of the run's iterations: its schedule then opens the whole window by a third of its
+# length, as the run's does, and the run costs a third more.
 BACKTEST_PROBE_SHARE = 1.0 / 3.0
 # The candidates are fitted on the paths at t <= each of these shares of the window and scored
 # on the rest (forecasting's rolling origin): a form that forecasts well only from the longest
@@ -243,13 +243,6 @@ BACKTEST_LR = 3e-3
 # starts and how it moves) a pattern of its own: enough to part 3 bodies and a ground, each
 # into a few pieces, while every cluster keeps dozens of points to fit.
 BACKTEST_CLUSTERS = 8
-# The rigid candidate's knots are damped towards the knots of the points' centroid path, with
-# this fraction of the largest singular value of their velocity design: a slow spin leaves
-# directions of the knots that the velocities barely fix (a centre turning with the spin:
-# singular values 1e-9 of the largest on a nearly still ground), which least squares filled with
-# knots a million units away; directions that a spin fixes (a tenth of the largest and more)
-# keep their velocity fit to 1e-6 of it.
-RIGID_FIT_RIDGE = 1e-3
 # The training keeps each image's float copy and its half of SSIM (9 floats a pixel) between
 # steps for at most this many bytes of images, the rest recomputed from the 8-bit pixels at each
 # use: every catalogue and D-NeRF scene up to 800 px fits, while a capture of thousands of

@@ -43,11 +43,11 @@ from velogauss.train.frequency import series_frequency
 from velogauss.train.mixing import cluster_targets, separate_patterns
 from velogauss.train.optim import acceleration_group
 from velogauss_core.constants import (BACKTEST_HEADS, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
-                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, RIGID_FIT_RIDGE, RIGID_HULL_OPACITY)
+                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, RIGID_HULL_OPACITY)
 from velogauss_core.motion import UNDECLARED_EFFECTS
 from velogauss_fast.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.coefficients import (lagrange_basis, masked, mixing_weights, motion_patterns_at,
+from velogauss_fast.motion.coefficients import (masked, mixing_weights, motion_patterns_at,
                                                  rigid_velocity_patterns)
 from velogauss_fast.motion.trajectory import base_state
 
@@ -288,25 +288,18 @@ def _start_patterns(motion, form, times, paths, velocities, labels, omega):
 def rigid_fit(times, x, v, spec):
     """A VG-COEF-RIGID row (ω, knots) whose field best fits the velocities v at x (J, m, 3):
     per time ω_j and u_j of v = ω_j × x + u_j, the spin their mean, then the knots whose
-    ċ(t) − ω × c(t) best fits the u_j (linear in the knots, read off the public pattern), damped
-    towards the knots of the points' centroid path (RIGID_FIT_RIDGE), which the velocities leave
-    free along the spin axis and barely fix under a slow spin."""
+    ċ(t) − ω × c(t) best fits the u_j (linear in the knots, read off the public pattern)."""
     J = len(times)
     spins = np.stack([np.linalg.lstsq(rigid_design(x[j]), v[j].reshape(-1), rcond=None)[0][:3] for j in range(J)])
     omega = spins.mean(0)
     u = (v - np.cross(omega, x)).mean(1)  # [J, 3]
     n = spec.rigid_knots
-    t = torch.as_tensor(times, dtype=torch.float64)
+    t = torch.as_tensor(times, dtype=torch.float64)[:, None, None]
     columns = []
     for unit in np.eye(3 * n):
         row = torch.as_tensor(np.concatenate([omega, unit]), dtype=torch.float64)[None]
-        columns.append(rigid_velocity_patterns(row, t[:, None, None], spec.max_time)[:, 0, :3].numpy().reshape(-1))
-    design = np.stack(columns, axis=1)  # [3 J, 3 n]
-    basis = torch.stack([l for l, _, _ in lagrange_basis(t, spec.max_time, n)], dim=1).numpy()  # [J, n]
-    centroid = np.linalg.lstsq(basis, x.mean(1), rcond=None)[0].reshape(-1)  # the centroid path's knots
-    damping = RIGID_FIT_RIDGE * np.linalg.norm(design, 2)
-    knots = np.linalg.lstsq(np.concatenate([design, damping * np.eye(3 * n)]),
-                            np.concatenate([u.reshape(-1), damping * centroid]), rcond=None)[0]
+        columns.append(rigid_velocity_patterns(row, t, spec.max_time)[:, 0, :3].numpy().reshape(-1))
+    knots = np.linalg.lstsq(np.stack(columns, axis=1), u.reshape(-1), rcond=None)[0]
     return np.concatenate([omega, knots])
 
 

@@ -135,7 +135,7 @@ def _rigid_centre(B, t, max_time):
     """(omega, c(t), c'(t), c''(t)) of B's rows, each (..., K, 3), from its knots (VG-COEF-RIGID)."""
     omega, *knots = B.split(3, dim=-1)  # [K, 3] each
     c = c_dot = c_ddot = 0.0
-    for knot, (l, dl, ddl) in zip(knots, lagrange_basis(t, max_time, len(knots))):
+    for knot, (l, dl, ddl) in zip(knots, _lagrange(t, max_time, len(knots))):
         c, c_dot, c_ddot = c + knot * l, c_dot + knot * dl, c_ddot + knot * ddl
     return omega.expand_as(c), c, c_dot.expand_as(c), c_ddot
 
@@ -145,10 +145,9 @@ def _rigid_columns(translation, rotation):
     return torch.cat([translation, rotation, translation.new_zeros(translation.shape[:-1] + (6,))], dim=-1)
 
 
-def lagrange_basis(t, max_time, n):
+def _lagrange(t, max_time, n):
     """[(l_i(t), l_i'(t), l_i''(t))] of the Lagrange basis of the n (2 or 3) knots evenly spaced
-    over [0, max_time] (VG-COEF-RIGID's centre c(t) = sum_i c_i l_i(t)); t a tensor, derivatives
-    that do not depend on t as floats."""
+    over [0, max_time]; t a tensor, derivatives that do not depend on t as floats."""
     nodes = [max_time * i / (n - 1) for i in range(n)]
     out = []
     for i, node in enumerate(nodes):
