@@ -1,6 +1,8 @@
 """Walkthrough part: the affine velocity model, from basis to Eulerian field
-(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-RIGID, VG-COEF-HARM, VG-VEL, VG-FIELD,
+(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-RIGID, VG-COEF-HARM, VG-COEF-COAST, VG-VEL, VG-FIELD,
 VG-FIELD-GAUSS)."""
+
+import dataclasses
 
 import numpy as np
 
@@ -153,6 +155,25 @@ def harmonic_coefficients_section(figures):
         [session({"C[1]": C[1], "omega": omega, "x": x},
                  "P = harmonic_velocity_patterns(C, omega, t)  # a + b cos(Ω t) + c sin(Ω t)",
                  {"P(0)": harmonic_velocity_patterns(C, omega, 0.0)}, *steps)],
+    )
+
+
+def coasting_section(figures):
+    """VG-COEF-COAST: the time network's patterns inside the window, and kept at its end past it."""
+    params = learned_motion_params()
+    coast = dataclasses.replace(CFG, max_time=0.75, future="coast")
+    steps = []
+    for t in (0.5, 0.75, 1.0):
+        steps += [f"P = motion_patterns(params, t={t}, coast)[0, :6]",
+                  {"coast": motion_patterns(params, t, coast)[0, :6], "integrate": motion_patterns(params, t, CFG)[0, :6]}]
+    return Section(
+        "Past the observed window `T = max_time` the time network continues by its activation's tail, "
+        "a law nobody chose. Under `model.future = \"coast\"` the patterns read `P(min(t, T))`: the "
+        "motion carries on in the field of the window's last patterns, so a spin keeps spinning and a "
+        "drift keeps drifting. An option, not the default (benchmarks/FIDELITY.md, 0m). The example "
+        "reads the first pattern's translation and rotation columns with T = 0.75: equal to the "
+        "network's own inside the window, held at t = 0.75 past it.",
+        [session({"T": coast.max_time}, *steps)],
     )
 
 
@@ -314,5 +335,5 @@ def mlp_velocity_section(figures):
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
             "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
-            "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-FIELD-GAUSS": between_section,
+            "VG-COEF-COAST": coasting_section, "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-FIELD-GAUSS": between_section,
             "VG-VEL-MLP": mlp_velocity_section}
