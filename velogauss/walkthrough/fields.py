@@ -165,7 +165,8 @@ def coasting_section(figures):
     steps = []
     for t in (0.5, 0.75, 1.0):
         steps += [f"P = motion_patterns(params, t={t}, coast)[0, :6]",
-                  {"coast": motion_patterns(params, t, coast)[0, :6], "integrate": motion_patterns(params, t, CFG)[0, :6]}]
+                  {"coast": motion_patterns(params, t, coast)[0, :6],
+                   "integrate": motion_patterns(params, t, CFG)[0, :6]}]
     return Section(
         "Past the observed window `T = max_time` the time network continues by its activation's tail, "
         "a law nobody chose. Under `model.future = \"coast\"` the patterns read `P(min(t, T))`: the "
@@ -335,5 +336,5 @@ def mlp_velocity_section(figures):
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
             "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
-            "VG-COEF-COAST": coasting_section, "VG-VEL": velocity_section, "VG-FIELD": field_section, "VG-FIELD-GAUSS": between_section,
-            "VG-VEL-MLP": mlp_velocity_section}
+            "VG-COEF-COAST": coasting_section, "VG-VEL": velocity_section, "VG-FIELD": field_section,
+            "VG-FIELD-GAUSS": between_section, "VG-VEL-MLP": mlp_velocity_section}

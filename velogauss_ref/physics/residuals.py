@@ -6,6 +6,8 @@ v(x, t) = Phi(x) w(t, E(gamma(x))) -- the code's dependence on x included. Slow 
 the fast path's structured forward-mode derivatives are tested against these.
 """
 
+import dataclasses
+
 import autograd.numpy as np
 from autograd import jacobian
 
@@ -26,7 +28,7 @@ def transport_residual(params, x, t, cfg):
     check_array("x", x, (None, 3))
     check_scalar("t", t)
     dv_dt, grad_v = velocity_derivatives(params, x, t, cfg)
-    v = velocity_field(params, x, t, cfg)
+    v = velocity_field(params, x, t, _own_patterns(cfg))
     return dv_dt + np.einsum("nij,nj->ni", grad_v, v) - acceleration_field(params, x, t, cfg)
 
 
@@ -50,7 +52,14 @@ def velocity_derivatives(params, x, t, cfg):
     depends on x_n alone, so this is exactly the per-point derivative. No points (N = 0)
     give empty arrays.
     """
-    return _point_derivatives(lambda y, s: velocity_field(params, y, s, cfg), x, t)
+    field = _own_patterns(cfg)
+    return _point_derivatives(lambda y, s: velocity_field(params, y, s, field), x, t)
+
+
+def _own_patterns(cfg):
+    """`cfg` read with its forms' own patterns at every time: the residuals, a training loss, do
+    not coast past the window (VG-COEF-COAST; the fast path's closed-form rates never do)."""
+    return dataclasses.replace(cfg, future="integrate")
 
 
 def mlp_residuals(params, x, t, cfg, with_divergence=False):

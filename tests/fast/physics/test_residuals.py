@@ -1,6 +1,8 @@
 """velogauss_fast.physics.residuals: VG-TRANSPORT and VG-DIV (batched forward-mode) against
 the reference's per-point reverse-mode autograd, and closed forms."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -59,6 +61,16 @@ def test_divergence_reference_vs_fast(device, seed, t, masked, n, n_freqs_t, pat
 def test_shared_jet_reference_vs_fast(device, seed, t, masked, n, n_freqs_t, pattern_form):
     args = _args(seed, t, masked, n, n_freqs_t, pattern_form)
     check_agreement(ref_both, physics_residuals, args, diff=(0, 1, 2), device=device, seed=seed)
+
+
+@pytest.mark.spec("VG-TRANSPORT", "VG-DIV", "VG-COEF-COAST")
+@pytest.mark.parametrize("pattern_form", ["mlp", "rigid", "harmonic"])
+def test_coasting_leaves_the_residuals_past_the_window_to_the_forms_own_patterns(device, pattern_form):
+    # A training loss: under future "coast" both twins read each form's own patterns at t = 7,
+    # past the window's end 0.6, as under "integrate" (the fast path's closed-form rates).
+    params, x, t, cfg = _args(1, 7.0, False, 3, 1, pattern_form)
+    coast = dataclasses.replace(cfg, future="coast")
+    check_agreement(ref_both, physics_residuals, (params, x, t, coast), diff=(0, 1, 2), device=device, seed=1)
 
 
 @pytest.mark.spec("VG-TRANSPORT", "VG-DIV")
