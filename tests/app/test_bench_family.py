@@ -31,11 +31,15 @@ def scene_json(seed, kinds, rig, px, frames):
             "generator": {"resolution": [px, px], "n_times": frames}}
 
 
-def metrics_json(extrap, frozen=None, interp=None, vel_obs=None, vel_fut=None):
-    """The parts of a run's metrics.json that the table reads (a deform-only run has no velocity)."""
+def metrics_json(extrap, frozen=None, interp=None, vel_obs=None, vel_fut=None, trans=(None, None),
+                 only=(None, None)):
+    """The parts of a run's metrics.json that the table reads (a deform-only run has no velocity);
+    `trans` and `only`: the (observed, future) translation part and translation-only score."""
+    def window(i, vel):
+        return {"relative_l2": vel, "translation_relative_l2": trans[i], "translation_only_relative_l2": only[i]}
     return {"splits": {"interpolation": {"mean": {"psnr": interp}}, "extrapolation": {"mean": {"psnr": extrap}}},
             "freeze_baseline": {"mean": {"psnr": frozen}},
-            "motion": {"velocity": {"observed": {"relative_l2": vel_obs}, "future": {"relative_l2": vel_fut}}}}
+            "motion": {"velocity": {"observed": window(0, vel_obs), "future": window(1, vel_fut)}}}
 
 
 @pytest.fixture
@@ -46,14 +50,18 @@ def study(tmp_path):
        1 | spin, orbit    | 0.02    | 0.30    | 22     | 23     | -1   | 20          | 2
        3 | flight, still  | 0.04    | 0.08    | 25     | 18     |  7   | 21          | 4
        7 | flight         | 0.10    | 0.12    | 28     | 20     |  8   | —           | —
+
+    The translation part obs / fut and the translation-only score obs / fut: seed 1 0.01 / 0.20
+    and 0.5 / 0.6, seed 3 0.03 / 0.05 and 0.2 / 0.3, seed 7 none (a run from before the split).
     """
     for seed, kinds, rig, px, frames in ((1, ["spin", "orbit"], "hemisphere", 96, 30),
                                          (3, ["flight", "still"], "ring", 64, 20),
                                          (7, ["flight"], "monocular", 128, 40), (9, ["pulse"], "ring", 64, 16)):
         write_json(tmp_path / "data" / f"random-{seed}" / "scene.json", scene_json(seed, kinds, rig, px, frames))
+    split = {1: {"trans": (0.01, 0.20), "only": (0.5, 0.6)}, 3: {"trans": (0.03, 0.05), "only": (0.2, 0.3)}, 7: {}}
     for seed, numbers in ((1, (22.0, 23.0, 31.0, 0.02, 0.30)), (3, (25.0, 18.0, 30.0, 0.04, 0.08)),
                           (7, (28.0, 20.0, 33.0, 0.10, 0.12))):
-        write_json(tmp_path / f"random-{seed}-full-s0" / "metrics.json", metrics_json(*numbers))
+        write_json(tmp_path / f"random-{seed}-full-s0" / "metrics.json", metrics_json(*numbers, **split[seed]))
     for seed, extrap in ((1, 20.0), (3, 21.0)):
         write_json(tmp_path / f"random-{seed}-deform-only-s0" / "metrics.json", metrics_json(extrap))
     write_json(tmp_path / "random-3-full-s0" / "motion_form.json", {"choice": "rigid-gravity", "scores": {}})
@@ -74,23 +82,37 @@ def test_table_rows_spreads_and_targets(study):
     assert [r[:5] for r in rows] == [["1", "spin, orbit", "hemisphere", "96", "30"],
                                      ["3", "flight, still", "ring", "64", "20"],
                                      ["7", "flight", "monocular", "128", "40"]]
-    assert rows[0][5:] == ["0.020", "0.300", "31.00", "22.00", "23.00", "-1.00", "20.00", "+2.00", "—"]
-    assert rows[1][5:] == ["0.040", "0.080", "30.00", "25.00", "18.00", "+7.00", "21.00", "+4.00", "rigid-gravity"]
-    assert rows[2][5:] == ["0.100", "0.120", "33.00", "28.00", "20.00", "+8.00", "—", "—", "—"]
+    assert rows[0][5:] == ["0.020", "0.300", "0.010", "0.200", "0.500", "0.600",
+                           "31.00", "22.00", "23.00", "-1.00", "20.00", "+2.00", "—"]
+    assert rows[1][5:] == ["0.040", "0.080", "0.030", "0.050", "0.200", "0.300",
+                           "30.00", "25.00", "18.00", "+7.00", "21.00", "+4.00", "rigid-gravity"]
+    assert rows[2][5:] == ["0.100", "0.120", "—", "—", "—", "—", "33.00", "28.00", "20.00", "+8.00", "—", "—", "—"]
     # Linear percentiles of n sorted values: position q/100 (n - 1). Of 3 values the 90th lies at 1.8
     # (0.8 of the way from the 2nd to the 3rd), the 10th at 0.2; of 2 values at 0.9 and 0.1.
     spreads = {(r[0], r[1]): r[2:] for r in section_rows(text, "Distribution")}
     assert spreads == {
         ("all", "vel. err obs"): ["3", "0.040", "0.088", "0.100"],  # 0.04 + 0.8 × 0.06
         ("all", "vel. err fut"): ["3", "0.120", "0.264", "0.300"],  # 0.12 + 0.8 × 0.18
+        ("all", "vel. err obs, translation part"): ["2", "0.020", "0.028", "0.030"],  # 0.01 + 0.9 × 0.02
+        ("all", "vel. err fut, translation part"): ["2", "0.125", "0.185", "0.200"],  # 0.05 + 0.9 × 0.15
+        ("all", "translation-only model's vel. err obs"): ["2", "0.350", "0.470", "0.500"],  # 0.2 + 0.9 × 0.3
+        ("all", "translation-only model's vel. err fut"): ["2", "0.450", "0.570", "0.600"],  # 0.3 + 0.9 × 0.3
         ("all", "extrap − frozen (dB)"): ["3", "7.000", "0.600", "-1.000"],  # -1 + 0.2 × 8
         ("all", "extrap − deform-only (dB)"): ["2", "3.000", "2.200", "2.000"],  # 2 + 0.1 × 2
         ("flight", "vel. err obs"): ["2", "0.070", "0.094", "0.100"],  # 0.04 + 0.9 × 0.06
         ("flight", "vel. err fut"): ["2", "0.100", "0.116", "0.120"],  # 0.08 + 0.9 × 0.04
+        ("flight", "vel. err obs, translation part"): ["1", "0.030", "0.030", "0.030"],
+        ("flight", "vel. err fut, translation part"): ["1", "0.050", "0.050", "0.050"],
+        ("flight", "translation-only model's vel. err obs"): ["1", "0.200", "0.200", "0.200"],
+        ("flight", "translation-only model's vel. err fut"): ["1", "0.300", "0.300", "0.300"],
         ("flight", "extrap − frozen (dB)"): ["2", "7.500", "7.100", "7.000"],  # 7 + 0.1 × 1
         ("flight", "extrap − deform-only (dB)"): ["1", "4.000", "4.000", "4.000"],
         **{(kind, metric): values for kind in ("spin", "orbit") for metric, values in (
             ("vel. err obs", ["1", "0.020", "0.020", "0.020"]), ("vel. err fut", ["1", "0.300", "0.300", "0.300"]),
+            ("vel. err obs, translation part", ["1", "0.010", "0.010", "0.010"]),
+            ("vel. err fut, translation part", ["1", "0.200", "0.200", "0.200"]),
+            ("translation-only model's vel. err obs", ["1", "0.500", "0.500", "0.500"]),
+            ("translation-only model's vel. err fut", ["1", "0.600", "0.600", "0.600"]),
             ("extrap − frozen (dB)", ["1", "-1.000", "-1.000", "-1.000"]),
             ("extrap − deform-only (dB)", ["1", "2.000", "2.000", "2.000"]))},
     }
@@ -146,3 +168,14 @@ def test_scenes_bad_input_renders_nothing(tmp_path, monkeypatch, args):
 def test_parse_seeds():
     assert family.parse_seeds("tuning") == TUNING_SEEDS
     assert family.parse_seeds(" 5, 0,5") == (5, 0)
+
+
+def test_translation_only_of_drawn_scenes():
+    # Seed 1000 of the family is one body spinning in place (kinds ["spin"]): without spin
+    # nothing of its motion is left, up to the sample's mean offset from the centre.
+    text = bench_family("translation-only", "--seeds", "1000").output
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines()
+            if line.startswith("|") and not line.startswith("|--")]
+    rows = [r for r in rows if r[0] not in ("seed", "window")]
+    assert rows[0][:2] == ["1000", "spin"] and float(rows[0][2]) > 0.99 and float(rows[0][3]) > 0.99
+    assert ["observed", "1", rows[0][2], rows[0][2], rows[0][2], "0 (≤ 0.05)"] in rows

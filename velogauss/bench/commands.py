@@ -292,7 +292,8 @@ def dnerf_command(
 
 family_app = typer.Typer(
     help="The scene family's study (velogauss.bench.family): `scenes` renders seeds' scenes and their sweep "
-         "grid, `table` the per-scene scores, their spread by kind of motion and the targets.",
+         "grid, `table` the per-scene scores, their spread by kind of motion and the targets, `translation-only` "
+         "each scene's own velocity score without spin.",
     no_args_is_help=True,
 )
 bench_app.add_typer(family_app, name="family")
@@ -311,6 +312,22 @@ def family_scenes_command(
 
     with user_errors():
         family.scenes(seeds, out, _names(ablations, "--ablations"), set_, echo=typer.echo)
+
+
+@family_app.command("translation-only")
+def family_translation_only_command(
+    seeds: str = typer.Option(..., help="tuning, report (velogauss.scenes.family's lists) or comma-separated seeds."),
+    write: Optional[Path] = typer.Option(None, "--write", help="Also write the Markdown to this file."),
+):
+    """Each scene's own velocity error if every body moved with its true mean velocity and did not spin (Markdown)."""
+    from velogauss.bench import family
+    from velogauss.io_utils import write_text
+
+    with user_errors():
+        text = family.translation_only_markdown(family.translation_only(family.parse_seeds(seeds)))
+        if write is not None:
+            write_text(write, text)
+        typer.echo(text, nl=False)
 
 
 @family_app.command("table")

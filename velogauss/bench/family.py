@@ -10,12 +10,19 @@ metrics.json (`velogauss.evaluate.evaluate_model`'s result) into one row per sce
 
 - particle velocity relative error: `motion.velocity.observed.relative_l2` and
   `motion.velocity.future.relative_l2` (means over the evaluation times of each window);
+- its split (`velogauss.evaluate`'s module docstring): the error of each body's mean motion,
+  `translation_relative_l2`, and the scene's own `translation_only_relative_l2`, what moving
+  each body with its true mean velocity and nothing else would score, observed and future;
 - PSNR: `splits.interpolation.mean.psnr`, `splits.extrapolation.mean.psnr`, and the freeze
   baseline's `freeze_baseline.mean.psnr` (the last observed instant held still);
 - the deform-only run's extrapolation PSNR: what the velocity field buys over a deformation
   network alone;
 - the run folder's `motion_form.json` `choice` (`model.patterns = "auto"`), when written, marked
   "(held)" when its `future` is "hold", "(coast)" when "coast".
+
+`velogauss bench family translation-only --seeds S` scores each scene's own translation-only
+velocity error from its drawn parameters (`translation_only`): the floor that the velocity
+targets sit under when the bodies spin or change shape.
 
 Then the distributions (over all scenes, and per kind of motion: a scene counts under each
 kind of its moving bodies) and the targets, met or missed. Runs of `ABLATIONS` that have not
@@ -29,10 +36,12 @@ from typing import get_args
 
 import numpy as np
 import tomli_w
+from tqdm.auto import tqdm
 
 from velogauss.bench.harness import markdown_cell
 from velogauss.io_utils import write_text
-from velogauss.scenes.family import KINDS, REPORT_SEEDS, TUNING_SEEDS, make_random_scene
+from velogauss.scenes.family import (KINDS, REPORT_SEEDS, TUNING_SEEDS, draw_parameters, make_random_scene,
+                                     scene_from_parameters)
 from velogauss_core.motion import Ablation
 
 SEED_LISTS = {"tuning": TUNING_SEEDS, "report": REPORT_SEEDS}
@@ -48,6 +57,8 @@ PERCENTILE_METHOD = "linear"
 # (key, header, format) of the per-scene table's numeric columns.
 COLUMNS = (
     ("vel_obs", "vel. err obs", "{:.3f}"), ("vel_fut", "vel. err fut", "{:.3f}"),
+    ("trans_obs", "of it translation, obs", "{:.3f}"), ("trans_fut", "of it translation, fut", "{:.3f}"),
+    ("only_obs", "translation-only, obs", "{:.3f}"), ("only_fut", "translation-only, fut", "{:.3f}"),
     ("interp", "interp PSNR", "{:.2f}"), ("extrap", "extrap PSNR", "{:.2f}"), ("frozen", "frozen PSNR", "{:.2f}"),
     ("gain_frozen", "extrap − frozen", "{:+.2f}"), ("deform_extrap", "deform-only extrap", "{:.2f}"),
     ("gain_deform", "extrap − deform-only", "{:+.2f}"),
@@ -55,6 +66,9 @@ COLUMNS = (
 # (key, label, which way is better) of the distributed scores.
 SPREAD = (
     ("vel_obs", "vel. err obs", "lower"), ("vel_fut", "vel. err fut", "lower"),
+    ("trans_obs", "vel. err obs, translation part", "lower"), ("trans_fut", "vel. err fut, translation part", "lower"),
+    ("only_obs", "translation-only model's vel. err obs", "lower"),
+    ("only_fut", "translation-only model's vel. err fut", "lower"),
     ("gain_frozen", "extrap − frozen (dB)", "higher"), ("gain_deform", "extrap − deform-only (dB)", "higher"),
 )
 BETTER = {key: better for key, _, better in SPREAD}
@@ -141,6 +155,39 @@ def scenes(seeds, out, ablations=ABLATIONS, overrides=(), echo=print):
     return path
 
 
+def translation_only(seeds):
+    """`[(seed, kinds, observed, future)]`: each seed's scene's own translation-only velocity
+    score (`velogauss.evaluate`'s `translation_only_relative_l2`: what moving every body with its
+    true mean velocity, without spin or change of shape, scores), from its drawn parameters
+    alone: nothing is rendered or trained."""
+    from velogauss.evaluate import TrueMotion, velocity_error
+
+    rows = []
+    for seed in tqdm(seeds, desc="translation-only", leave=False):
+        params = draw_parameters(seed)
+        scene = scene_from_parameters(params)
+        error = velocity_error(TrueMotion(scene), scene, params["max_time"])
+        rows.append((seed, tuple(params["kinds"]), *(error[w]["translation_only_relative_l2"]
+                                                    for w in ("observed", "future"))))
+    return rows
+
+
+def translation_only_markdown(rows):
+    """`translation_only`'s rows as Markdown: per scene, then the spread over the scenes and how
+    many reach the velocity targets' bounds (TARGETS) with translation alone."""
+    lines = ["| seed | kinds | translation-only, obs | translation-only, fut |", "|---:|---|---:|---:|"]
+    lines += [_row([seed, ", ".join(kinds), markdown_cell(obs, "{:.3f}"), markdown_cell(fut, "{:.3f}")])
+              for seed, kinds, obs, fut in rows]
+    bounds = {key: bound for _, key, statistic, _, bound in TARGETS if statistic == "median"}
+    lines += ["", "| window | n | median | p90 | worst | scenes at or under the target's bound |", "|---|---:|---:|---:|---:|---:|"]
+    for column, window, key in ((2, "observed", "vel_obs"), (3, "future", "vel_fut")):
+        values = [r[column] for r in rows]
+        n, *stats = spread(values, "lower")
+        reached = sum(v is not None and v <= bounds[key] for v in values)
+        lines.append(_row([window, n, *(markdown_cell(x, "{:.3f}") for x in stats), f"{reached} (≤ {bounds[key]:g})"]))
+    return "\n".join(lines) + "\n"
+
+
 def run_folder(out, scene, ablation):
     """`out/<scene>-<ablation>-s<RUN_SEED>`: where the grid's sweep trains that point."""
     return Path(out) / f"{scene}-{ablation}-s{RUN_SEED}"
@@ -181,6 +228,9 @@ def scene_row(scene, full_run, deform_run):
             "px": scene["generator"]["resolution"][0], "frames": scene["generator"]["n_times"],
             "vel_obs": _at(metrics, "motion", "velocity", "observed", "relative_l2"),
             "vel_fut": _at(metrics, "motion", "velocity", "future", "relative_l2"),
+            **{f"{short}_{window[:3]}": _at(metrics, "motion", "velocity", window, key)
+               for short, key in (("trans", "translation_relative_l2"), ("only", "translation_only_relative_l2"))
+               for window in ("observed", "future")},
             "interp": _at(metrics, "splits", "interpolation", "mean", "psnr"), "extrap": extrap, "frozen": frozen,
             "gain_frozen": _difference(extrap, frozen), "deform_extrap": deform_extrap,
             "gain_deform": _difference(extrap, deform_extrap),
