@@ -177,7 +177,12 @@ class TrainConfig:
     """CPU threads of torch and of the compositing kernels; 0: velogauss.threads chooses (one torch thread,
     one compositing thread per core), as more threads than cores only wait for each other."""
     warmup: Span = "auto"
-    """Iterations on the t = 0 frames only, motion frozen ("auto": SCHEDULE's share)"""
+    """Iterations on the earliest frames only, motion frozen ("auto": SCHEDULE's share)"""
+    warmup_views: _int(ge=1, le=1024) = 1
+    """Frames the warm-up draws from where t = 0 has fewer than train.views (monocular video): the earliest this
+    many, within WARMUP_WINDOW_SHARE of the window. 1 (the default): the t = 0 frames only, since 8 lifted the scene
+    it was tried on (D-NeRF bouncingballs) and not those it was then measured on (spec/density.md, "The warm-up's
+    views")."""
     curriculum: Span = "auto"
     """Iterations over which the sampled times open up to max_time"""
     views: _int(ge=1, le=64) = 3

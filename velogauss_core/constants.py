@@ -243,6 +243,10 @@ BACKTEST_LR = 3e-3
 # starts and how it moves) a pattern of its own: enough to part 3 bodies and a ground, each
 # into a few pieces, while every cluster keeps dozens of points to fit.
 BACKTEST_CLUSTERS = 8
+# `train.warmup_views` > 1 (monocular video): the warm-up's frames never reach past this share
+# of the window, where the frozen motion would blur bodies that have moved (spec/density.md,
+# "The warm-up's views").
+WARMUP_WINDOW_SHARE = 0.1
 # The training keeps each image's float copy and its half of SSIM (9 floats a pixel) between
 # steps for at most this many bytes of images, the rest recomputed from the 8-bit pixels at each
 # use: every catalogue and D-NeRF scene up to 800 px fits, while a capture of thousands of

@@ -22,7 +22,7 @@ from velogauss.train import loop
 from velogauss.train.checkpoint import CHECKPOINT_FORMAT, checkpoint_path, load_checkpoint, load_model
 from velogauss.train.densify import DensityStats, cap_at, densify_and_prune
 from velogauss.train.optim import make_optimizer
-from velogauss.train.sampling import FrameSampler, auto_iterations, views_per_iteration
+from velogauss.train.sampling import FrameSampler, auto_iterations, views_per_iteration, warmup_end
 from velogauss.train.static import detect_moving, pixel_footprint
 from velogauss.visualize import render_run
 from velogauss_fast.motion.code import physics_code
@@ -60,6 +60,23 @@ def test_curriculum_opens_the_time_window():
     assert drawn == {0.0, 0.25, 0.5, 0.75}
     static = FrameSampler(times, warmup=10, curriculum=20, moving=False)
     assert static.window(0) == 0.75  # nothing moves: every frame from the start
+
+
+def test_a_monocular_warmup_draws_its_first_frames_and_a_rig_its_start():
+    """spec/density.md, "The warm-up's views"."""
+    mono = np.arange(150) / 149.0  # one camera per time, as D-NeRF
+    sampler = FrameSampler(mono, warmup=10, curriculum=200, moving=True, views=3, warmup_views=8)
+    rng = np.random.default_rng(0)
+    assert {sampler.sample(it, rng) for it in range(10) for _ in range(40)} == set(range(8))
+    assert sampler.window(10) == pytest.approx(7 / 149)  # the curriculum opens from there, not back to t = 0
+    assert sampler.window(209) == pytest.approx(1.0)
+    # A short clip: the eighth frame lies past a tenth of the window, so the warm-up stops there.
+    assert warmup_end(np.arange(20) / 19.0, 3, 8) == pytest.approx(0.1)
+    # A rig whose start has train.views cameras keeps the start alone; two cameras do not.
+    assert warmup_end(np.repeat(np.arange(20) / 19.0, 3), 3, 8) == 0.0
+    assert warmup_end(np.repeat(np.arange(40) / 39.0, 2), 3, 8) == pytest.approx(3 / 39)
+    assert warmup_end(mono, 3, 1) == 0.0  # one view, the default: the start
+    assert load_config().train.warmup_views == 1
 
 
 def test_views_of_a_step_share_one_time_and_differ_in_camera():

@@ -204,7 +204,7 @@ class Trainer:
         # The distinct training cameras (multi-view video repeats each pose at every time).
         self.cameras = list({(f.camera.viewmat.tobytes(), f.camera.K.tobytes()): f.camera for f in data.train}.values())
         self.sampler = FrameSampler([f.time for f in data.train], cfg.train.warmup, cfg.train.curriculum,
-                                    self.spec.moving)
+                                    self.spec.moving, cfg.train.views, cfg.train.warmup_views)
         self.background = torch.as_tensor(data.background, dtype=torch.float32, device=device)
         self.eval_frames = _spread(data.interpolation, _EVAL_FRAMES)
         self.adf_start = cfg.train.adf_start if cfg.train.adf_start != "auto" else self.auto_adf_start()

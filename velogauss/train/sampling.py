@@ -1,8 +1,11 @@
 """What each training iteration looks at: a training frame, and physics collocation points.
 
-Frames follow a time curriculum: during the warm-up only the t = 0 frames (the canonical
-state) are drawn; then the window of allowed times opens linearly from 0 to `max_time`
-over `curriculum` iterations, so the velocity is learned from short integrations first.
+Frames follow a time curriculum: during the warm-up only the earliest frames (the canonical
+state) are drawn: those at t = 0, or, with `warmup_views` > 1 where t = 0 has fewer frames than an
+iteration renders (monocular video), the earliest `warmup_views` frames within
+`WARMUP_WINDOW_SHARE` of the window, so that the canonical Gaussians are seen from several cameras. Then the window of allowed times opens
+linearly to `max_time` over `curriculum` iterations, so the velocity is learned from short
+integrations first.
 A scene without motion draws from every frame at once. An iteration may look at several
 training views of its frame's time (`train.views`): the Gaussians' state is computed once
 and seen by several cameras, which pins positions in depth, where one view's gradient is
@@ -15,28 +18,32 @@ import numpy as np
 import torch
 
 from velogauss.config import SCHEDULE_ITERATIONS
+from velogauss_core.constants import WARMUP_WINDOW_SHARE
 
 
 class FrameSampler:
     """Draws training frame indices by the curriculum of the module docstring.
 
-    times: (F,) frame times; warmup, curriculum: iterations; moving: the scene has motion.
+    times: (F,) frame times; warmup, curriculum: iterations; moving: the scene has motion;
+    views: the frames an iteration renders (`train.views`); warmup_views: the frames the warm-up
+    draws from where t = 0 has fewer than `views` (`train.warmup_views`).
     """
 
-    def __init__(self, times, warmup, curriculum, moving):
+    def __init__(self, times, warmup, curriculum, moving, views=1, warmup_views=1):
         self.times = np.asarray(times, dtype=np.float64)
         self.warmup, self.curriculum, self.moving = int(warmup), int(curriculum), bool(moving)
         self.t0 = float(self.times.min())
         self.t1 = float(self.times.max())
+        self.t_warm = warmup_end(self.times, views, warmup_views)
 
     def window(self, iteration):
         """Latest time that may be drawn at `iteration`."""
         if not self.moving:
             return self.t1
         if iteration < self.warmup:
-            return self.t0
+            return self.t_warm
         opened = min(1.0, (iteration - self.warmup + 1) / max(1, self.curriculum))
-        return self.t0 + opened * (self.t1 - self.t0)
+        return max(self.t_warm, self.t0 + opened * (self.t1 - self.t0))
 
     def sample(self, iteration, rng):
         """One frame index allowed at `iteration`, uniformly among the allowed frames."""
@@ -52,6 +59,20 @@ class FrameSampler:
         others = np.flatnonzero(same & (np.arange(len(self.times)) != first))
         extra = rng.choice(others, size=min(views - 1, len(others)), replace=False) if views > 1 else []
         return [first, *(int(i) for i in extra)]
+
+
+def warmup_end(times, views, warmup_views):
+    """The latest time the warm-up draws (spec/density.md, "The warm-up's views"), from the
+    frames' `times` (F,): their start where `views` or more frames lie there (a rig: an
+    iteration finds its views at t = 0, as the schedule was tuned), else the time of the
+    `warmup_views`-th earliest frame, but no later than WARMUP_WINDOW_SHARE of the window past
+    the start (monocular video)."""
+    times = np.sort(np.asarray(times, dtype=np.float64))
+    t0, t1 = float(times[0]), float(times[-1])
+    if np.count_nonzero(times == t0) >= views:
+        return t0
+    nth = float(times[min(int(warmup_views), len(times)) - 1])
+    return max(t0, min(nth, t0 + WARMUP_WINDOW_SHARE * (t1 - t0)))
 
 
 def views_per_iteration(times, views, moving=True):
