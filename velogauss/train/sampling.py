@@ -1,11 +1,11 @@
 """What each training iteration looks at: a training frame, and physics collocation points.
 
 Frames follow a time curriculum: during the warm-up only the earliest frames (the canonical
-state) are drawn: those at t = 0, or, with `warmup_views` > 1 where t = 0 has fewer frames than an
-iteration renders (monocular video), the earliest `warmup_views` frames within
-`WARMUP_WINDOW_SHARE` of the window, so that the canonical Gaussians are seen from several cameras. Then the window of allowed times opens
-linearly to `max_time` over `curriculum` iterations, so the velocity is learned from short
-integrations first.
+state) are drawn: those at t = 0, or, with `warmup_views` > 1 where t = 0 has fewer frames than
+an iteration renders (monocular video), the earliest `warmup_views` frames within
+`WARMUP_WINDOW_SHARE` of the window, so that the canonical Gaussians are seen from several
+cameras. Then the window of allowed times opens linearly to `max_time` over `curriculum`
+iterations, so the velocity is learned from short integrations first.
 A scene without motion draws from every frame at once. An iteration may look at several
 training views of its frame's time (`train.views`): the Gaussians' state is computed once
 and seen by several cameras, which pins positions in depth, where one view's gradient is
