@@ -23,9 +23,10 @@ work (the profile in benchmarks/RESULTS.md). The worker waits on a socket, not i
 beside another process it takes no core that it does not use (velogauss/threads.py).
 
 Collocation points near the Gaussians (placement "gaussians") are drawn as indices into the
-moving Gaussians plus offsets. Every moving Gaussian is moved to the collocation time, not
-only the drawn ones, as the renders move them: a batch of another size rounds differently in
-float32, and training grows such roundings into different results.
+moving Gaussians plus offsets. Only the drawn Gaussians are moved to the collocation time:
+each Gaussian's motion reads its own canonical state alone, so the subset's rows equal the
+whole batch's up to float32 rounding, at `n_points` Gaussians' cost instead of every one's
+(benchmarks/RESULTS.md, "Training step profile at real resolution").
 """
 
 from typing import NamedTuple
@@ -160,10 +161,11 @@ def loss_and_gradients(canon, leaves, cfg, params, spec, draws):
 @torch.no_grad()
 def collocation_near(canon, draw, params, spec):
     """x (n, 3): the collocation points of `draw` (a PhysicsDraw near the Gaussians), the
-    drawn Gaussians' means at draw.t plus the offsets (every moving Gaussian is moved: see
-    the module docstring); canon: the model's `Canonical`."""
-    means = moving_state_at(params, spec, canon.means, canon.quats, canon.scales, canon.moving, draw.t)[0]
-    return means.index_select(0, draw.index) + draw.offsets
+    drawn Gaussians' means at draw.t plus the offsets (only the drawn Gaussians are moved, each
+    once: see the module docstring); canon: the model's `Canonical`."""
+    drawn, rows = torch.unique(draw.index, return_inverse=True)
+    means = moving_state_at(params, spec, *(v.index_select(0, drawn) for v in canon), draw.t)[0]
+    return means.index_select(0, rows) + draw.offsets
 
 
 def start(model, cfg, params, spec, draws, worker):
