@@ -109,7 +109,8 @@ class _ModelChoices:
     patterns: Union[Literal["auto"], PatternForm] = "auto"
     """The motion patterns' time form: "mlp" (VG-COEF), "rigid" (VG-COEF-RIGID), "harmonic" (VG-COEF-HARM), or
     "auto": the form that best predicts the held-out end of the window from a short probe's Gaussian paths
-    (velogauss.train.backtest); config.toml records the choice."""
+    (velogauss.train.backtest), or "mlp" without a probe when the window reaches t = 1 and leaves nothing to
+    forecast; config.toml records the choice."""
     future: Literal["auto", "integrate", "coast", "hold"] = "auto"
     """Past the observed window: "integrate" carries the motion on; "coast" carries it on with the motion
     patterns kept at their value at the window's end (the velocity's persistence forecast); "hold" keeps every
@@ -119,8 +120,8 @@ class _ModelChoices:
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     """How the mixing weights start: "uniform", "clusters" (one k-means region per pattern,
     velogauss.train.mixing) or "auto": clusters when the backtest's probe found still Gaussians beside
-    moving ones, as they cost a single body (FIDELITY.md, section 0b); without a probe, when the effects
-    allow `static`."""
+    moving ones, as they cost a single body (FIDELITY.md, section 0b); "uniform" where `patterns = "auto"`
+    needs no probe (a window that reaches t = 1); without a probe otherwise, when the effects allow `static`."""
     rigid_centre: Literal["auto", "hull"] = "auto"
     """Rigid patterns' centres: "hull", anchored on the moving Gaussians' hull centroid
     (velogauss.train.centres), or "auto": hull for one body on a parabola, where learned ones drift off it,

@@ -218,6 +218,8 @@ def motion_form_line(run_dir):
     if not path.is_file():
         return None
     report = json.loads(path.read_text())
+    if "reason" in report:  # chosen without a backtest (velogauss.train.backtest.nothing_to_forecast)
+        return f"motion form: {report['choice']} ({report['reason']})"
     scores = report.get("scores", {}).get(report["choice"])
     scored = "" if not scores else " (tail scores " + " / ".join(f"{x:.2f}" for x in scores) + "; 1 = freezing)"
     future = {"hold": "the future holds: no form predicted the held-out tails better than freezing the motion",

@@ -12,7 +12,8 @@ from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.scenes import make_scene
 from velogauss.train.backtest import (CANDIDATES, backtest, beats_freezing, candidate_spec, candidates, choose_form,
-                                      harmonic_fit, origins, probe_config, rigid_fit, select)
+                                      harmonic_fit, leaves_a_future, origins, probe_config, rigid_fit,
+                                      select)
 from velogauss.train.frequency import series_frequency
 from velogauss_core.constants import BACKTEST_HEADS, FREQ_SCAN_STEP
 from velogauss_fast.motion.basis import basis_matrix
@@ -157,6 +158,25 @@ def test_a_choice_is_written_into_the_config_and_never_read_from_the_scene(tiny_
     tiny_scene.metadata["effects"] = ["stretch", "oscillation"]
     again, _ = choose_form(cfg, tiny_scene, probe_run)
     assert again == chosen
+
+
+def test_a_window_that_reaches_the_end_of_time_takes_the_time_network_without_a_probe(tmp_path):
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=6, n_points=300, n_heldout=1)
+    every_frame = load_scene(tmp_path / "toss", split="all")  # trained up to t = 1
+    ending_early = load_scene(tmp_path / "toss")  # trained up to t = 0.6, frames 0.2 apart
+    assert not leaves_a_future(every_frame) and leaves_a_future(ending_early)
+
+    def no_probe(*args, **kwargs):
+        raise AssertionError("a window with nothing to forecast trains no probe")
+
+    cfg = load_config(None, [*SMALL, "train.iterations=30"])
+    chosen, report = choose_form(cfg, every_frame, no_probe)
+    assert (chosen.model.patterns, chosen.model.mixing_init, chosen.model.future) == ("mlp", "uniform", "integrate")
+    assert report["choice"] == "mlp" and report["scores"] == {}
+    # What the user set is kept.
+    kept = load_config(None, [*SMALL, "model.mixing_init=clusters", "model.future=hold"])
+    assert (choose_form(kept, every_frame, no_probe)[0].model.mixing_init,
+            choose_form(kept, every_frame, no_probe)[0].model.future) == ("clusters", "hold")
 
 
 def test_the_probe_s_schedule_scales_with_it_whether_set_or_auto():

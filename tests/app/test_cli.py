@@ -173,3 +173,6 @@ def test_the_command_says_what_was_chosen_and_whether_the_future_holds(tmp_path)
     assert motion_form_line(tmp_path) == ("motion form: mlp (tail scores 0.60 / 0.70 / 0.80; 1 = freezing); the "
                                           "motion coasts past the window: its patterns keep their value at the "
                                           "window's end")
+    (tmp_path / "motion_form.json").write_text(json.dumps({"choice": "mlp", "scores": {}, "future": "integrate",
+                                                           "reason": "the observed window reaches t = 1"}))
+    assert motion_form_line(tmp_path) == "motion form: mlp (the observed window reaches t = 1)"
