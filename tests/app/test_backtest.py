@@ -12,8 +12,7 @@ from velogauss.config import load_config
 from velogauss.data import load_scene
 from velogauss.scenes import make_scene
 from velogauss.train.backtest import (CANDIDATES, backtest, beats_freezing, candidate_spec, candidates, choose_form,
-                                      harmonic_fit, leaves_a_future, origins, probe_config, rigid_fit,
-                                      select)
+                                      harmonic_fit, leaves_a_future, origins, probe_config, rigid_fit, select)
 from velogauss.train.frequency import series_frequency
 from velogauss_core.constants import BACKTEST_HEADS, FREQ_SCAN_STEP
 from velogauss_fast.motion.basis import basis_matrix
@@ -175,8 +174,8 @@ def test_a_window_that_reaches_the_end_of_time_takes_the_time_network_without_a_
     assert report["choice"] == "mlp" and report["scores"] == {}
     # What the user set is kept.
     kept = load_config(None, [*SMALL, "model.mixing_init=clusters", "model.future=hold"])
-    assert (choose_form(kept, every_frame, no_probe)[0].model.mixing_init,
-            choose_form(kept, every_frame, no_probe)[0].model.future) == ("clusters", "hold")
+    kept_model = choose_form(kept, every_frame, no_probe)[0].model
+    assert (kept_model.mixing_init, kept_model.future) == ("clusters", "hold")
 
 
 def test_the_probe_s_schedule_scales_with_it_whether_set_or_auto():
