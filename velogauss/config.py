@@ -111,12 +111,15 @@ class _ModelChoices:
     "auto": the form that best predicts the held-out end of the window from a short probe's Gaussian paths
     (velogauss.train.backtest), or "mlp" without a probe when the window reaches t = 1 and leaves nothing to
     forecast; config.toml records the choice."""
-    future: Literal["auto", "integrate", "coast", "hold"] = "auto"
+    future: Literal["auto", "integrate", "coast", "hold", "fit"] = "auto"
     """Past the observed window: "integrate" carries the motion on; "coast" carries it on with the motion
     patterns kept at their value at the window's end (the velocity's persistence forecast); "hold" keeps every
-    Gaussian where it is at the window's end (the position's); "auto": "hold" when the backtest of
-    `patterns = "auto"` found no form that predicts the held-out end of the window better than freezing it,
-    else "integrate" (spec/motion.md, "The future past the window")."""
+    Gaussian where it is at the window's end (the position's); "fit": at the end of training the form that
+    best forecasts the trained paths' held-out tails carries the Gaussians on from the window's end
+    (velogauss.train.forecast); "auto": "fit" when the backtest of `patterns = "auto"` chose a form that strays
+    from the window's paths (the time network then trains the window), "hold" when it found no form that
+    predicts the held-out end of the window better than freezing it, else "integrate" (spec/motion.md, "The
+    future past the window")."""
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"
     """How the mixing weights start: "uniform", "clusters" (one k-means region per pattern,
     velogauss.train.mixing) or "auto": clusters when the backtest's probe found still Gaussians beside

@@ -216,16 +216,30 @@ def motion_form_line(run_dir):
     when the run chose nothing (its form was set, or the run is static)."""
     path = Path(run_dir) / "motion_form.json"
     if not path.is_file():
-        return None
+        return f"forecast: {forecast_phrase(run_dir)}" if (Path(run_dir) / "forecast.json").is_file() else None
     report = json.loads(path.read_text())
     if "reason" in report:  # chosen without a backtest (velogauss.train.backtest.nothing_to_forecast)
         return f"motion form: {report['choice']} ({report['reason']})"
     scores = report.get("scores", {}).get(report["choice"])
     scored = "" if not scores else " (tail scores " + " / ".join(f"{x:.2f}" for x in scores) + "; 1 = freezing)"
     future = {"hold": "the future holds: no form predicted the held-out tails better than freezing the motion",
-              "coast": "the motion coasts past the window: its patterns keep their value at the window's end"}.get(
-        report.get("future"), "the motion is integrated past the window")
+              "coast": "the motion coasts past the window: its patterns keep their value at the window's end",
+              "fit": forecast_phrase(run_dir)}.get(report.get("future"), "the motion is integrated past the window")
+    if report.get("patterns", report["choice"]) != report["choice"]:
+        future = (f"it strays {report['window_fit']:.2f} of the motion from the window's paths, so the time network "
+                  f"trains the window; {future}")
     return f"motion form: {report['choice']}{scored}; {future}"
+
+
+def forecast_phrase(run_dir):
+    """What the forecast fitted at the end of training (forecast.json) did, as a clause."""
+    path = Path(run_dir) / "forecast.json"
+    if not path.is_file():
+        return "past the window, a form fitted to the trained paths (at the end of training)"
+    report = json.loads(path.read_text())
+    return {"hold": "past it, the future holds: on the trained paths no form beat freezing the motion",
+            "integrate": "past it, the time network carries on: on the trained paths it forecast best"}.get(
+        report["future"], f"past it, {report['choice']} fitted to the trained paths carries the Gaussians on")
 
 
 def headline(result, run_dir):

@@ -80,8 +80,10 @@ PATTERN_FORMS: tuple[str, ...] = get_args(PatternForm)
 QueryCode = Literal["gaussians", "network"]
 # Past the observed window the motion carries on ("integrate"), carries on with the motion patterns
 # kept at their value at the window's end ("coast": the velocity's persistence forecast), or every
-# Gaussian keeps its state at the window's end ("hold": the position's persistence forecast).
-Future = Literal["integrate", "coast", "hold"]
+# Gaussian keeps its state at the window's end ("hold": the position's persistence forecast), or a
+# form fitted to the trained paths carries the Gaussians on from their state there ("fit": the
+# model's forecast, velogauss.model.velogauss_model; the motion's own functions read it as "integrate").
+Future = Literal["integrate", "coast", "hold", "fit"]
 FUTURES: tuple[str, ...] = get_args(Future)
 # Where a material point that is not a Gaussian takes its velocity (spec/motion.md): "gaussians"
 # with mixing weights interpolated from its nearest Gaussians' own (VG-FIELD-GAUSS, the affine
@@ -173,8 +175,9 @@ class MotionSpec(NetworkSizes):
       "gaussians" from its nearest Gaussians' (VG-FIELD-GAUSS) under the affine velocity,
       "network" elsewhere (the velocity MLP of no-pds reads the point itself);
     future: past max_time the motion carries on ("integrate"), carries on with the motion
-      patterns kept at P(max_time) ("coast"), or holds every Gaussian at its state at max_time
-      with zero velocity ("hold"; spec/motion.md "The future past the window").
+      patterns kept at P(max_time) ("coast"), holds every Gaussian at its state at max_time
+      with zero velocity ("hold"), or hands the Gaussians at max_time to a form fitted to the
+      trained paths, the model's forecast ("fit"; spec/motion.md "The future past the window").
     The defaults are the plan of the default config for a scene that declares nothing, over
     the whole window (tests/app/test_profile.py pins it), so a spec built directly for the
     pure functions names only what it changes. Masks and effects are tuples so the spec stays

@@ -25,13 +25,17 @@ def build_model(cfg, spec: MotionSpec, points, colors, rng: np.random.Generator)
     return _assemble(cfg, spec, gaussians, rng)
 
 
-def model_from_state(cfg, spec: MotionSpec, state: dict) -> VeloGaussModel:
-    """A model with the shapes of a saved `state_dict()` `state` (load it afterwards)."""
+def model_from_state(cfg, spec: MotionSpec, state: dict, forecast_spec: MotionSpec | None = None) -> VeloGaussModel:
+    """A model with the shapes of a saved `state_dict()` `state` (load it afterwards);
+    forecast_spec: the spec of the forecast it holds (`VeloGaussModel.set_forecast`), if any."""
     prefix = "gaussians."
     gstate = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
     gaussians = Gaussians.empty_like_state(gstate, cfg.model.sh_degree)
     # The drawn values are overwritten by loading; a private generator leaves the run's untouched.
-    return _assemble(cfg, spec, gaussians, np.random.default_rng(0))
+    model = _assemble(cfg, spec, gaussians, np.random.default_rng(0))
+    if forecast_spec is not None:
+        model.set_forecast(MotionParameters(forecast_spec, np.random.default_rng(0)))
+    return model
 
 
 def scene_spec(cfg, metadata: dict | None) -> MotionSpec:

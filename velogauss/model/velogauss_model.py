@@ -6,7 +6,10 @@ scene) and the resolved `MotionSpec`; the motion itself is the pure function
 VG-ADF-COMPOSE). Only the particles flagged `moving` are integrated and deformed; the
 others are rendered at their canonical state, so the cost of motion grows with the moving
 part of the scene. Under scheme "adf-step" (VG-CARRY) the ADF's state at a start time is
-carried to t by the velocity instead.
+carried to t by the velocity instead. Under `spec.future = "fit"` the model may hold a forecast:
+a velocity-only motion fitted to its own trained paths (velogauss.train.forecast), which carries the
+Gaussians past the window from their state at `spec.max_time` (spec/motion.md, "The future past the
+window").
 
 The model is a door of the fast path (spec/conventions.md, "Bad input"): the times and
 points its public methods take from outside are checked here, finiteness included; what it
@@ -20,9 +23,11 @@ from velogauss.model import motion as motion_fns
 from velogauss_core.motion import MotionSpec
 from velogauss_fast.checks import check_array, check_finite
 from velogauss_fast.motion.between import mixing_between
+from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.scalars import check_time
 from velogauss_fast.quaternion import normalize_quat
 from velogauss_core.rendering import RasterizeMode, check_mode
+from velogauss_fast.motion.trajectory import base_state
 from velogauss_fast.raster import rasterize
 
 
@@ -43,6 +48,7 @@ class VeloGaussModel(nn.Module):
         self.gaussians = gaussians
         self.motion = motion
         self.spec = spec
+        self.forecast = None
         self.register_buffer("moving", torch.ones(len(gaussians), dtype=torch.bool))
 
     @property
@@ -62,7 +68,9 @@ class VeloGaussModel(nn.Module):
         """(means (N, 3), quats (N, 4) unit, scales (N, 3), base means x* (N, 3)) at time t.
 
         params: the motion parameter dict, when the caller already built it this step;
-        spec: a variant of the model's spec (training skips the ADF before it learns);
+        spec: a variant of the model's spec (training skips the ADF before it learns), which
+        never reads the forecast; past the window the model's own spec hands a held forecast the
+        state at max_time (`set_forecast`);
         offset: scheme "adf-step" only, the signed step its training draws (VG-CARRY).
         A non-finite or non-scalar t raises ValueError.
         """
@@ -71,7 +79,37 @@ class VeloGaussModel(nn.Module):
         g = self.gaussians
         if spec.moving and params is None:
             params = self.motion.params()
+        if self._forecasts(t, spec):
+            return self._forecast_state(params, t)
         return moving_state_at(params, spec, g.means, g.quats, g.scales, self.moving, t, offset)
+
+    def set_forecast(self, forecast):
+        """Hold `forecast` (velogauss.model.motion.MotionParameters of a velocity-only spec, or None)
+        as the motion past the window; needs spec.future "fit"."""
+        if forecast is not None and self.spec.future != "fit":
+            raise ValueError(f"forecast: the model's spec.future is {self.spec.future!r}, not \"fit\"")
+        self.forecast = forecast
+
+    def _forecasts(self, t, spec):
+        """Whether time t is the forecast's: past the window of the model's own spec, with a forecast held."""
+        return self.forecast is not None and spec is self.spec and float(t) > spec.max_time
+
+    def _forecast_state(self, params, t):
+        """`state_at(t)` past the window under the forecast: the moving Gaussians' state at max_time
+        integrated to t in the forecast's field (VG-STEP from max_time), their codes at their
+        positions at t = 0, where the forecast's fit read them (spec/motion.md, "The future past
+        the window")."""
+        spec, g, T = self.spec, self.gaussians, self.spec.max_time
+        x, q, s, xs = moving_state_at(params, spec, g.means, g.quats, g.scales, self.moving, T)
+        start = moving_state_at(params, spec, g.means, g.quats, g.scales, self.moving, 0.0)[0]
+        idx = torch.nonzero(self.moving).squeeze(1)
+        fparams, fspec = self.forecast.params(), self.forecast.spec
+        z = physics_code(fparams, start.index_select(0, idx), fspec)
+        xi = x.index_select(0, idx)
+        xf, qf, sf = base_state(fparams, xi, q.index_select(0, idx), s.index_select(0, idx), z, float(t),
+                                fspec.step, fspec.integrator, fspec, t0=T)
+        moved = xs.index_select(0, idx) + (xf - xi)
+        return x.index_copy(0, idx, xf), q.index_copy(0, idx, qf), s.index_copy(0, idx, sf), xs.index_copy(0, idx, moved)
 
     def render_inputs_at(self, t):
         """The Gaussians at time t with their appearance, as a dict: means, quats, scales,
@@ -104,11 +142,14 @@ class VeloGaussModel(nn.Module):
         """Learned Eulerian velocity (M, 3) at world points x (M, 3); zero without a velocity model.
         Under spec.query_code "gaussians" the mixing weights at x are those of the Gaussians
         nearest to x at time t (their physics positions x*(t)), VG-FIELD-GAUSS; else the code
-        network's at x (VG-FIELD). A non-finite or wrongly shaped x, or a bad t, raises ValueError."""
+        network's at x (VG-FIELD). Past the window under a forecast, the forecast's field, its code
+        read at x. A non-finite or wrongly shaped x, or a bad t, raises ValueError."""
         check_finite(x=check_array("x", x, (None, 3)))
         _check_time(t)
         if not self.has_velocity:
             return torch.zeros_like(x)
+        if self._forecasts(t, self.spec):
+            return motion_fns.velocity_at(self.forecast.params(), self.forecast.spec, x, t)
         params = self.motion.params()
         if self.spec.query_code == "gaussians":
             m = self._mixing_between(params, x, self.state_at(t, params)[3])
@@ -120,13 +161,16 @@ class VeloGaussModel(nn.Module):
         they are at x (M, 3) at time t; zero without a velocity model. Under spec.query_code
         "gaussians" a point's mixing weights are those of the Gaussians nearest to x0 among the
         canonical means, frozen along its path (VG-FIELD-GAUSS); else the code network's at x0
-        (`velogauss.model.motion.particle_velocity`). Non-finite or wrongly shaped points, or
-        a bad t, raise ValueError."""
+        (`velogauss.model.motion.particle_velocity`). Past the window under a forecast, the
+        forecast's field, its code read at x0. Non-finite or wrongly shaped points, or a bad t,
+        raise ValueError."""
         check_array("x0", x0, (None, 3))
         check_finite(x0=x0, x=check_array("x", x, tuple(x0.shape)))
         _check_time(t)
         if not self.has_velocity:
             return torch.zeros_like(x)
+        if self._forecasts(t, self.spec):
+            return motion_fns.particle_velocity(self.forecast.params(), self.forecast.spec, x0, x, t)
         params = self.motion.params()
         if self.spec.query_code == "gaussians":
             m = self._mixing_between(params, x0, self.gaussians.means)

@@ -49,7 +49,7 @@ from velogauss.train.frequency import series_frequency
 from velogauss.train.mixing import cluster_targets, separate_patterns
 from velogauss.train.optim import acceleration_group
 from velogauss_core.constants import (BACKTEST_HEADS, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
-                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, RIGID_HULL_OPACITY)
+                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, FORM_WINDOW_FIT, RIGID_HULL_OPACITY)
 from velogauss_core.motion import UNDECLARED_EFFECTS
 from velogauss_fast.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_fast.motion.code import physics_code
@@ -119,14 +119,20 @@ def choose_form(cfg, data, run, progress=False):
         heads = [float(times[last]) for last in origins(times)]
     choice = select(scores)
     form, effects = candidates(m.effects)[choice]
+    window = None if choice == "mlp" else window_fit(form, effects, times, paths, cfg, np.random.default_rng(cfg.train.seed))
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
     future = m.future
-    if future == "auto":
+    if window is not None and window > FORM_WINDOW_FIT and future in ("auto", "fit"):
+        # The form forecasts but does not follow the window: the time network trains it, and
+        # the forecast is fitted to the trained paths at the end (velogauss.train.forecast).
+        form, effects, future = "mlp", m.effects, "fit"
+    elif future == "auto":
         future = "integrate" if beats_freezing(scores, choice) else "hold"
     model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects, future=future)
     frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
-    report.update({"origins": heads, "scores": scores, "choice": choice, "future": future, "mixing_init": mixing,
-                   "frequency": frequency, "probe_s": probe_s, "backtest_s": time.perf_counter() - clock - probe_s})
+    report.update({"origins": heads, "scores": scores, "choice": choice, "window_fit": window, "patterns": form,
+                   "future": future, "mixing_init": mixing, "frequency": frequency, "probe_s": probe_s,
+                   "backtest_s": time.perf_counter() - clock - probe_s})
     return dataclasses.replace(cfg, model=model_cfg), report
 
 
@@ -237,9 +243,19 @@ def backtest(times, paths, cfg, rng):
     return scores
 
 
+def window_fit(form, effects, times, paths, cfg, rng):
+    """How far a candidate fitted to the whole window's paths (J, M, 3) at `times` (J,) strays from
+    them when integrated from their start: RMS position error over the RMS displacement from the
+    start (0: it follows the window exactly; 1: as far off as standing still)."""
+    motion = fit(form, effects, times, paths, cfg, rng)
+    spread = np.sqrt(((paths[1:] - paths[0]) ** 2).sum(-1).mean())
+    error = np.sqrt(((predict(motion, paths[0], paths[0], times) - paths)[1:] ** 2).sum(-1).mean())
+    return float(error / max(spread, 1e-12))
+
+
 def candidate_spec(form, effects, cfg, max_time):
     """The velocity-only ("no-adf") MotionSpec of a candidate form (`candidates`) over [0, max_time]."""
-    model_cfg = dataclasses.replace(cfg.model, ablation="no-adf", patterns=form, effects=effects)
+    model_cfg = dataclasses.replace(cfg.model, ablation="no-adf", patterns=form, effects=effects, future="integrate")
     return resolve_motion_spec(model_cfg, None, max_time)
 
 

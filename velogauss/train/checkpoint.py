@@ -29,8 +29,8 @@ from velogauss_core.motion import spec_from_dict
 MAGIC = "velogauss-checkpoint"  # the first word of every checkpoint
 # The layout of the payload, its config and spec; raise it with any change that an older
 # checkpoint would load wrongly under.
-CHECKPOINT_FORMAT = 4
-_KEYS = ("iteration", "config", "spec", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
+CHECKPOINT_FORMAT = 5
+_KEYS = ("iteration", "config", "spec", "forecast_spec", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
 
 
 def checkpoint_path(run_dir):
@@ -44,6 +44,8 @@ def save_checkpoint(run_dir, cfg, model, optimizer, stats, rng, iteration, run_s
         "iteration": int(iteration),
         "config": config_to_dict(cfg),
         "spec": dataclasses.asdict(model.spec),
+        # The forecast's plan (None without one): its parameters are in the model's state.
+        "forecast_spec": None if model.forecast is None else dataclasses.asdict(model.forecast.spec),
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
         "density": stats.state_dict(),
@@ -105,9 +107,15 @@ def load_model(run_dir, device="cpu"):
     `RUN_DIR/checkpoints/latest.pt`: every caller (eval, render, export, view) is inference."""
     payload = load_checkpoint(run_dir, device)
     cfg = config_from_dict(payload["config"], source=str(checkpoint_path(run_dir)))
-    model = model_from_state(cfg, spec_from_dict(payload["spec"]), payload["model"])
+    model = model_from_state(cfg, spec_from_dict(payload["spec"]), payload["model"], forecast_spec(payload))
     model.load_state_dict(payload["model"])
     return model.to(device).eval().requires_grad_(False), cfg
+
+
+def forecast_spec(payload):
+    """The MotionSpec of the forecast a checkpoint's model holds, or None."""
+    saved = payload["forecast_spec"]
+    return None if saved is None else spec_from_dict(saved)
 
 
 def remove_stale_temporaries(run_dir):

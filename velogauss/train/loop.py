@@ -41,7 +41,9 @@ from velogauss.memory import peak_rss_mib
 from velogauss.model import build_model, model_from_state, scene_spec
 from velogauss.model.velogauss_model import moving_state_at, render_gaussians
 from velogauss.threads import apply_threads
-from velogauss.train.checkpoint import checkpoint_path, load_checkpoint, remove_stale_temporaries, save_checkpoint
+from velogauss.train.checkpoint import (checkpoint_path, forecast_spec, load_checkpoint, remove_stale_temporaries,
+                                       save_checkpoint)
+from velogauss.train.forecast import fit_forecast, needs_forecast
 from velogauss.train.densify import DensityStats, densify_and_prune, reset_opacity, torch_generator
 from velogauss.train.backtest import choose_form, selects_form
 from velogauss.train.centres import anchor_centres, first_knot_mask, resolve_rigid_centre
@@ -127,13 +129,17 @@ def prepare(cfg, data, run_dir, resume=False, progress=False):
         saved = config_from_dict(payload["config"], str(checkpoint_path(run_dir)))
         cfg = resolve_from_run(cfg, saved)
         check_resume_config(saved, cfg)
-        model = model_from_state(cfg, spec_from_dict(payload["spec"]), payload["model"])
+        model = model_from_state(cfg, spec_from_dict(payload["spec"]), payload["model"], forecast_spec(payload))
         model.load_state_dict(payload["model"])
         model.to(device)
         rng = np.random.default_rng()
         rng.bit_generator.state = payload["numpy_rng"]
         torch.set_rng_state(payload["torch_rng"])
         start, state = payload["iteration"], RunState(**payload["extra"])
+        if cfg.model.future == "fit" and start < cfg.train.iterations:
+            # More training moves the paths: the forecast is fitted again at the new end.
+            model.set_forecast(None)
+            model.spec = dataclasses.replace(model.spec, future="fit")
         _truncate_log(run_dir / "log.jsonl", start)
         # The checkpoint and config.toml stay one truth: the changes check_resume_config allows.
         write_text(run_dir / "config.toml", to_toml(cfg))
@@ -246,6 +252,8 @@ class Trainer:
                 if cfg.eval_every and (done % cfg.eval_every == 0 or done == cfg.iterations):
                     self.log_eval(done, loss_value, psnr_ema, elapsed)
                 last = done == cfg.iterations
+                if last and not interrupted() and needs_forecast(self.model):
+                    self.fit_forecast()
                 if interrupted() or last or (cfg.checkpoint_every and done % cfg.checkpoint_every == 0):
                     self.state.psnr_ema = psnr_ema
                     self.checkpoint(done, elapsed)
@@ -390,6 +398,13 @@ class Trainer:
                   "elapsed_s": round(elapsed, 3), "peak_rss_mib": peak_rss_mib()}
         with open(self.run_dir / "log.jsonl", "a") as handle:
             handle.write(json.dumps(record) + "\n")
+
+    def fit_forecast(self):
+        """The future of a model whose spec says "fit", from its trained paths (velogauss.train.forecast),
+        with its own generator so that the run's draws stay those of an uninterrupted run; the
+        report goes to the run folder's forecast.json."""
+        report = fit_forecast(self.model, self.data, self.cfg, np.random.default_rng(self.cfg.train.seed))
+        write_text(self.run_dir / "forecast.json", json.dumps(report, indent=1))
 
     def checkpoint(self, done, elapsed):
         """Write the run's checkpoint after `done` iterations and `elapsed` seconds of training."""

@@ -1,0 +1,151 @@
+"""The forecast fitted to a trained model's paths (`model.future = "fit"`, velogauss.train.forecast),
+and the backtest's rule that leaves a window its form does not follow to the time network."""
+
+import dataclasses
+import types
+
+import numpy as np
+import pytest
+import torch
+
+from velogauss.config import load_config
+from velogauss.data import load_scene
+from velogauss.model import build_model
+from velogauss.model.motion import MotionParameters
+from velogauss.model.spec import resolve_motion_spec
+from velogauss.scenes import make_scene
+from velogauss.train import backtest as backtest_module
+from velogauss.train.backtest import candidate_spec, candidates, choose_form, window_fit
+from velogauss.train.checkpoint import load_model
+from velogauss.train.loop import train
+from velogauss_core.constants import FORM_WINDOW_FIT
+
+SMALL = ["model.n_patterns=4", "model.code_dim=4", "model.hidden=16", "model.depth=1"]
+T = 0.5
+
+
+def _rotation(axis, angle):
+    """(3, 3) rotation by `angle` about the unit `axis` (Rodrigues)."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _spinning_forecast(cfg, omega, centre):
+    """A rigid-drift forecast whose every pattern spins at `omega` (3,) about the still `centre` (3,)."""
+    # A fine step: the test is of where the forecast takes the Gaussians, not of the integrator's error.
+    spec = dataclasses.replace(candidate_spec(*candidates("auto")["rigid-drift"], cfg, T), step=1e-3)
+    motion = MotionParameters(spec, np.random.default_rng(1))
+    with torch.no_grad():
+        motion.time.copy_(torch.as_tensor(np.concatenate([omega, centre, centre]), dtype=torch.float32))
+    return motion.requires_grad_(False)
+
+
+def _model(cfg, n=40):
+    spec = resolve_motion_spec(cfg.model, None, T)
+    points = np.random.default_rng(0).uniform(-0.5, 0.5, (n, 3))
+    return build_model(cfg, spec, points, None, np.random.default_rng(0)).requires_grad_(False)
+
+
+def test_past_the_window_the_forecast_moves_the_gaussians_on_from_their_state_there():
+    cfg = load_config(None, [*SMALL, "model.patterns=mlp", "model.future=fit"])
+    model = _model(cfg)
+    before = [model.state_at(t) for t in (0.3, T, 0.8)]
+    omega, centre = np.array([0.0, 0.6, 1.8]), np.array([0.1, -0.2, 0.05])
+    model.set_forecast(_spinning_forecast(cfg, omega, centre))
+    # Inside the window nothing changes, to the bit.
+    for t, state in zip((0.3, T), before):
+        for a, b in zip(model.state_at(t), state):
+            assert torch.equal(a, b)
+    # Past it: the state at T turned about the centre by |omega| (t - T), whatever the window's motion did.
+    x_T, q_T, s_T, _ = before[1]
+    angle = np.linalg.norm(omega) * (0.8 - T)
+    R = _rotation(omega / np.linalg.norm(omega), angle)
+    x, q, s, _ = model.state_at(0.8)
+    expected = centre + (x_T.double().numpy() - centre) @ R.T
+    np.testing.assert_allclose(x.double().numpy(), expected, atol=2e-5)
+    # The Gaussians turn with the body: q = r ⊗ q_T, r the turn's quaternion (w, x, y, z), up to sign.
+    r = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * omega / np.linalg.norm(omega)])
+    w1, v1 = r[0], r[1:]
+    qT = q_T.double().numpy()
+    turned = np.concatenate([w1 * qT[:, :1] - qT[:, 1:] @ v1[:, None],
+                             w1 * qT[:, 1:] + qT[:, :1] * v1 + np.cross(v1, qT[:, 1:])], axis=1)
+    assert np.abs(np.abs((turned * q.double().numpy()).sum(1)) - 1).max() < 1e-5
+    np.testing.assert_allclose(s.numpy(), s_T.numpy(), rtol=1e-5)
+    # The velocity past the window is the forecast's: omega x (x - c).
+    points = torch.as_tensor(expected[:5], dtype=torch.float32)
+    v = model.particle_velocity(points, points, 0.8).double().numpy()
+    np.testing.assert_allclose(v, np.cross(omega, expected[:5] - centre), atol=1e-5)
+    v_field = model.velocity_at(points, 0.8).double().numpy()
+    np.testing.assert_allclose(v_field, np.cross(omega, expected[:5] - centre), atol=1e-5)
+
+
+def test_a_forecast_needs_a_spec_that_says_fit():
+    cfg = load_config(None, [*SMALL, "model.patterns=mlp", "model.future=integrate"])
+    model = _model(cfg)
+    with pytest.raises(ValueError, match="forecast: the model's spec.future is 'integrate'"):
+        model.set_forecast(_spinning_forecast(cfg, np.array([0.0, 0.0, 1.0]), np.zeros(3)))
+
+
+def test_a_trained_forecast_is_recorded_and_comes_back_from_the_checkpoint(tmp_path):
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
+    scene = load_scene(tmp_path / "toss")
+    cfg = load_config(None, [*SMALL, "train.iterations=40", "train.threads=1", "model.patterns=mlp",
+                             "model.future=fit"])
+    model = train(cfg, scene, tmp_path / "run", progress=False)
+    report = (tmp_path / "run" / "forecast.json").read_text()
+    # The future the end of training chose is the model's, and the checkpoint's.
+    assert model.spec.future in {"fit", "integrate", "hold"} and f'"future": "{model.spec.future}"' in report
+    assert (model.forecast is not None) == (model.spec.future == "fit")
+    loaded, _ = load_model(tmp_path / "run")
+    assert loaded.spec == model.spec and (loaded.forecast is None) == (model.forecast is None)
+    for a, b in zip(loaded.state_at(0.95), model.state_at(0.95)):
+        assert torch.equal(a, b)
+
+
+def _tossed(times):
+    """Paths (J, 60, 3) of a body spinning 4 rad per unit time while its centre flies on a parabola."""
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    body = np.random.default_rng(0).uniform(-0.3, 0.3, (60, 3))
+    c = np.array([0.2, -0.1, 0.0]) + np.outer(times, [0.8, 0.2, 1.5]) - 1.5 * np.outer(times ** 2, [0, 0, 1])
+    return np.stack([c[j] + body @ _rotation(axis, 4.0 * t).T for j, t in enumerate(times)])
+
+
+def _breathing(times):
+    """Paths of a body whose semi-axes oscillate out of phase: nothing rigid follows it."""
+    body = np.random.default_rng(1).uniform(-0.3, 0.3, (60, 3))
+    return np.stack([body * (1 + 0.3 * np.sin(9.0 * t + np.array([0.0, 2.0, 4.0]))) for t in times])
+
+
+TIMES = np.linspace(0.0, 0.75, 16)
+
+
+def test_the_window_fit_tells_a_form_that_follows_the_paths_from_one_that_cannot():
+    cfg = load_config(None, SMALL)
+    rigid = candidates("auto")["rigid"]
+    assert window_fit(*rigid, TIMES, _tossed(TIMES), cfg, np.random.default_rng(0)) < 0.1
+    # A rigid body cannot follow a change of shape: about as far off as standing still.
+    assert window_fit(*rigid, TIMES, _breathing(TIMES), cfg, np.random.default_rng(0)) > FORM_WINDOW_FIT
+
+
+def test_a_form_that_does_not_follow_the_window_leaves_it_to_the_time_network(tmp_path, monkeypatch):
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
+    scene = load_scene(tmp_path / "toss")
+    paths = _tossed(TIMES)
+    monkeypatch.setattr(backtest_module, "probe_paths", lambda model, data, rng: (TIMES, paths))
+    # Tail scores of a rigid body (the backtest's own choice on these paths: tests/app/test_backtest.py).
+    scores = {"rigid-drift": [0.5, 0.4, 0.4], "rigid": [0.1, 0.1, 0.1], "harmonic": [0.3, 0.2, 0.2], "mlp": [0.4] * 3}
+    monkeypatch.setattr(backtest_module, "backtest", lambda *args: scores)
+    probe = lambda *args, **kwargs: types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool))  # noqa: E731
+    cfg = load_config(None, [*SMALL, "train.iterations=30"])
+    # The tossed paths: a rigid form forecasts and follows them, and trains the window.
+    chosen, report = choose_form(cfg, scene, probe)
+    assert report["choice"] == "rigid" and report["window_fit"] < FORM_WINDOW_FIT
+    assert (chosen.model.patterns, chosen.model.future) == ("rigid", "integrate")
+    # The same choice straying from the window: the time network trains it, the forecast is fitted after.
+    monkeypatch.setattr(backtest_module, "window_fit", lambda *args: 2 * FORM_WINDOW_FIT)
+    chosen, report = choose_form(cfg, scene, probe)
+    assert report["choice"] == "rigid"
+    assert (chosen.model.patterns, chosen.model.future, report["patterns"]) == ("mlp", "fit", "mlp")
+    # A future the user set keeps the chosen form on the window.
+    kept = load_config(None, [*SMALL, "train.iterations=30", "model.future=integrate"])
+    assert choose_form(kept, scene, probe)[0].model.patterns == "rigid"
