@@ -116,8 +116,8 @@ class _ModelChoices:
     patterns kept at their value at the window's end (the velocity's persistence forecast); "hold" keeps every
     Gaussian where it is at the window's end (the position's); "fit": at the end of training the form that
     best forecasts the trained paths' held-out tails carries the Gaussians on from the window's end
-    (velogauss.train.forecast); "auto": "fit" when the backtest of `patterns = "auto"` chose a form that strays
-    from the window's paths (the time network then trains the window), "hold" when it found no form that
+    (velogauss.train.forecast); "auto": "fit" when the backtest of `patterns = "auto"` chose a form whose probe
+    reconstructs the window worse than the time network's (which then trains the window), "hold" when it found no form that
     predicts the held-out end of the window better than freezing it, else "integrate" (spec/motion.md, "The
     future past the window")."""
     mixing_init: Literal["auto", "uniform", "clusters"] = "auto"

@@ -226,8 +226,9 @@ def motion_form_line(run_dir):
               "coast": "the motion coasts past the window: its patterns keep their value at the window's end",
               "fit": forecast_phrase(run_dir)}.get(report.get("future"), "the motion is integrated past the window")
     if report.get("patterns", report["choice"]) != report["choice"]:
-        future = (f"it strays {report['window_fit']:.2f} of the motion from the window's paths, so the time network "
-                  f"trains the window; {future}")
+        window = report["window_psnr"]
+        future = (f"a probe trained with it reconstructs the window at {window[report['choice']]:.2f} dB against the "
+                  f"time network's {window['mlp']:.2f}, so the time network trains the window; {future}")
     return f"motion form: {report['choice']}{scored}; {future}"
 
 

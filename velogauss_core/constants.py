@@ -243,12 +243,13 @@ BACKTEST_LR = 3e-3
 # starts and how it moves) a pattern of its own: enough to part 3 bodies and a ground, each
 # into a few pieces, while every cluster keeps dozens of points to fit.
 BACKTEST_CLUSTERS = 8
-# A chosen form trains the window only if, fitted to the whole window's paths and integrated from
-# their start, it stays within this share of the paths' motion (RMS error over RMS displacement);
-# a form that forecasts the tails but fits the window worse leaves the window to the time network
-# and forecasts past it from the trained paths (`model.future = "fit"`), as a form that cannot
-# follow the window cost it up to 4.4 dB (benchmarks/FIDELITY.md, 0j and 0s).
-FORM_WINDOW_FIT = 0.3
+# A chosen form trains the window only if a probe trained with it renders the window's held-out
+# frames within this many dB of the time network's probe: twice the run-to-run noise of a D-NeRF
+# scene (0.5 dB, benchmarks/FIDELITY.md 0r); a form that forecasts but reconstructs worse leaves
+# the window to the time network and forecasts past it from the trained paths (`model.future = "fit"`).
+FORM_WINDOW_DB = 1.0
+# The frames (evenly spread) whose mean PSNR says how well a probe reconstructs the window.
+WINDOW_FRAMES = 8
 # `train.warmup_views` > 1 (monocular video): the warm-up's frames never reach past this share
 # of the window, where the frozen motion would blur bodies that have moved (spec/density.md,
 # "The warm-up's views").

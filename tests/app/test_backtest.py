@@ -139,22 +139,32 @@ def test_the_origins_are_the_heads_last_times_with_a_tail_to_score():
 def test_a_choice_is_written_into_the_config_and_never_read_from_the_scene(tiny_scene):
     cfg = load_config(None, [*SMALL, "train.iterations=30", "train.threads=1"])
 
-    def probe_run(probe_cfg, data, folder, progress=True):
-        assert probe_cfg.model.patterns == "mlp" and probe_cfg.train.iterations == 10
+    shapes = []
+
+    def probe_run(probe_cfg, data, folder, progress=True, frequency=None):
+        # The time network's first; a second only to see whether a chosen form reconstructs the window.
+        shapes.append(probe_cfg.model.patterns)
+        assert shapes[0] == "mlp" and len(shapes) <= 2 and probe_cfg.train.iterations == 10
         from velogauss.train.loop import train
-        return train(probe_cfg, data, folder, progress=progress)
+        return train(probe_cfg, data, folder, progress=progress, frequency=frequency)
 
     chosen, report = choose_form(cfg, tiny_scene, probe_run)
+    assert len(shapes) == (1 if report["choice"] == "mlp" else 2)
     assert chosen.model.patterns in {"mlp", "rigid", "harmonic"}
     assert report["choice"] in CANDIDATES and chosen.model.mixing_init in {"uniform", "clusters"}
     # The future follows the report's scores: held exactly when the choice did not beat freezing.
-    assert chosen.model.future == report["future"] == ("integrate" if beats_freezing(report["scores"], report["choice"])
-                                                       else "hold")
+    if report["patterns"] == "mlp" and report["choice"] != "mlp":  # the form did not reconstruct the window
+        assert chosen.model.future == report["future"] == "fit"
+    else:
+        assert chosen.model.future == report["future"] == ("integrate" if beats_freezing(report["scores"],
+                                                                                          report["choice"]) else "hold")
     # A future the user set is kept.
     kept = load_config(None, [*SMALL, "train.iterations=30", "train.threads=1", "model.future=integrate"])
+    shapes.clear()
     assert choose_form(kept, tiny_scene, probe_run)[0].model.future == "integrate"
     # The same data with other declared effects chooses the same: the declaration is not read.
     tiny_scene.metadata["effects"] = ["stretch", "oscillation"]
+    shapes.clear()
     again, _ = choose_form(cfg, tiny_scene, probe_run)
     assert again == chosen
 

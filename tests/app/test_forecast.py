@@ -1,5 +1,5 @@
 """The forecast fitted to a trained model's paths (`model.future = "fit"`, velogauss.train.forecast),
-and the backtest's rule that leaves a window its form does not follow to the time network."""
+and the backtest's rule that leaves a window its form does not reconstruct to the time network."""
 
 import dataclasses
 import types
@@ -15,10 +15,10 @@ from velogauss.model.motion import MotionParameters
 from velogauss.model.spec import resolve_motion_spec
 from velogauss.scenes import make_scene
 from velogauss.train import backtest as backtest_module
-from velogauss.train.backtest import candidate_spec, candidates, choose_form, window_fit
+from velogauss.train.backtest import candidate_spec, candidates, choose_form, window_psnr
 from velogauss.train.checkpoint import load_model
 from velogauss.train.loop import train
-from velogauss_core.constants import FORM_WINDOW_FIT
+from velogauss_core.constants import FORM_WINDOW_DB, WINDOW_FRAMES
 
 SMALL = ["model.n_patterns=4", "model.code_dim=4", "model.hidden=16", "model.depth=1"]
 T = 0.5
@@ -102,50 +102,59 @@ def test_a_trained_forecast_is_recorded_and_comes_back_from_the_checkpoint(tmp_p
         assert torch.equal(a, b)
 
 
-def _tossed(times):
-    """Paths (J, 60, 3) of a body spinning 4 rad per unit time while its centre flies on a parabola."""
-    axis = np.array([1.0, 2.0, 2.0]) / 3.0
-    body = np.random.default_rng(0).uniform(-0.3, 0.3, (60, 3))
-    c = np.array([0.2, -0.1, 0.0]) + np.outer(times, [0.8, 0.2, 1.5]) - 1.5 * np.outer(times ** 2, [0, 0, 1])
-    return np.stack([c[j] + body @ _rotation(axis, 4.0 * t).T for j, t in enumerate(times)])
+class _Renders:
+    """A stand-in model for `window_psnr`: renders each frame's own image, offset by `offset`."""
+
+    def __init__(self, frames, offset):
+        self.images = {id(f.camera): torch.as_tensor(f.image) for f in frames}
+        self.offset = offset
+        self.gaussians = types.SimpleNamespace(means=torch.zeros(1, 3))
+
+    def render(self, camera, t, background):
+        image = self.images.get(id(camera))
+        return (torch.zeros(1, 1, 3) if image is None else image + self.offset), None, None
 
 
-def _breathing(times):
-    """Paths of a body whose semi-axes oscillate out of phase: nothing rigid follows it."""
-    body = np.random.default_rng(1).uniform(-0.3, 0.3, (60, 3))
-    return np.stack([body * (1 + 0.3 * np.sin(9.0 * t + np.array([0.0, 2.0, 4.0]))) for t in times])
-
-
-TIMES = np.linspace(0.0, 0.75, 16)
-
-
-def test_the_window_fit_tells_a_form_that_follows_the_paths_from_one_that_cannot():
-    cfg = load_config(None, SMALL)
-    rigid = candidates("auto")["rigid"]
-    assert window_fit(*rigid, TIMES, _tossed(TIMES), cfg, np.random.default_rng(0)) < 0.1
-    # A rigid body cannot follow a change of shape: about as far off as standing still.
-    assert window_fit(*rigid, TIMES, _breathing(TIMES), cfg, np.random.default_rng(0)) > FORM_WINDOW_FIT
-
-
-def test_a_form_that_does_not_follow_the_window_leaves_it_to_the_time_network(tmp_path, monkeypatch):
+def test_the_window_psnr_scores_the_held_out_frames_inside_the_window(tmp_path):
     make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
     scene = load_scene(tmp_path / "toss")
-    paths = _tossed(TIMES)
-    monkeypatch.setattr(backtest_module, "probe_paths", lambda model, data, rng: (TIMES, paths))
-    # Tail scores of a rigid body (the backtest's own choice on these paths: tests/app/test_backtest.py).
+    frames = scene.interpolation
+    assert 0 < len(frames) <= WINDOW_FRAMES and all(f.time <= scene.max_time for f in frames)
+    # Every held-out frame, off by 0.1 before the renders' clamp to [0, 1]; the training frames,
+    # rendered black, are not read.
+    expected = np.mean([10 * np.log10(1 / np.mean((np.clip(f.image - 0.1, 0, 1) - f.image) ** 2)) for f in frames])
+    assert window_psnr(_Renders(frames, -0.1), scene) == pytest.approx(expected, abs=1e-3)
+    # Without held-out frames, the training frames are scored: each rendered exactly, the 100 dB cap.
+    alone = dataclasses.replace(scene, interpolation=[])
+    assert window_psnr(_Renders(scene.train, 0.0), alone) == pytest.approx(100.0)
+
+
+def test_a_form_that_reconstructs_the_window_worse_leaves_it_to_the_time_network(tmp_path, monkeypatch):
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
+    scene = load_scene(tmp_path / "toss")
+    times = np.linspace(0.0, 0.5, 8)
+    monkeypatch.setattr(backtest_module, "probe_paths", lambda model, data, rng: (times, np.zeros((8, 60, 3))))
     scores = {"rigid-drift": [0.5, 0.4, 0.4], "rigid": [0.1, 0.1, 0.1], "harmonic": [0.3, 0.2, 0.2], "mlp": [0.4] * 3}
     monkeypatch.setattr(backtest_module, "backtest", lambda *args: scores)
-    probe = lambda *args, **kwargs: types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool))  # noqa: E731
+    monkeypatch.setattr(backtest_module, "window_psnr", lambda model, data: model.db)
+    probes = []
+
+    def probe(cfg, data, folder, progress=False, frequency=None, form_db=34.5):
+        probes.append(cfg.model.patterns)
+        return types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool),
+                                     db=35.0 if cfg.model.patterns == "mlp" else form_db)
+
     cfg = load_config(None, [*SMALL, "train.iterations=30"])
-    # The tossed paths: a rigid form forecasts and follows them, and trains the window.
+    # Within FORM_WINDOW_DB of the time network's probe: the chosen form trains the window.
     chosen, report = choose_form(cfg, scene, probe)
-    assert report["choice"] == "rigid" and report["window_fit"] < FORM_WINDOW_FIT
-    assert (chosen.model.patterns, chosen.model.future) == ("rigid", "integrate")
-    # The same choice straying from the window: the time network trains it, the forecast is fitted after.
-    monkeypatch.setattr(backtest_module, "window_fit", lambda *args: 2 * FORM_WINDOW_FIT)
-    chosen, report = choose_form(cfg, scene, probe)
-    assert report["choice"] == "rigid"
-    assert (chosen.model.patterns, chosen.model.future, report["patterns"]) == ("mlp", "fit", "mlp")
-    # A future the user set keeps the chosen form on the window.
+    assert probes == ["mlp", "rigid"] and report["window_psnr"]["rigid"] == 34.5
+    assert (chosen.model.patterns, chosen.model.future, report["choice"]) == ("rigid", "integrate", "rigid")
+    # Worse by more: the time network trains the window, and the forecast is fitted after it.
+    worse = 35.0 - FORM_WINDOW_DB - 0.5
+    chosen, report = choose_form(cfg, scene, lambda *a, **k: probe(*a, **k, form_db=worse))
+    assert (chosen.model.patterns, chosen.model.future, report["choice"], report["patterns"]) == (
+        "mlp", "fit", "rigid", "mlp")
+    # A future the user set keeps the chosen form on the window, with no second probe.
+    probes.clear()
     kept = load_config(None, [*SMALL, "train.iterations=30", "model.future=integrate"])
-    assert choose_form(kept, scene, probe)[0].model.patterns == "rigid"
+    assert choose_form(kept, scene, probe)[0].model.patterns == "rigid" and probes == ["mlp"]

@@ -17,7 +17,12 @@ the video alone, never from a scene's name or declared effects:
    rolling origin);
 4. `select`: walking the candidates from the fewest free parameters to the most, a richer form
    replaces the choice only when it predicts better at every origin; the choice stands when its
-   mean score is below 1, else the time network. That is the run's `model.patterns` (and, for a
+   mean score is below 1, else the time network;
+5. `window_psnr`: a form that forecasts may still reconstruct the window worse; a second probe,
+   trained with the chosen form, renders the window's held-out frames, and when it scores more
+   than FORM_WINDOW_DB below the time network's probe the window goes to the time network and
+   the form's role to the forecast fitted at the end of training (`model.future = "fit"`,
+   velogauss.train.forecast). Otherwise the choice is the run's `model.patterns` (and, for a
    drifting rigid centre, its effects without gravity); the run then trains from scratch with
    it, as if it had been set. When no candidate beat freezing, `model.future = "auto"` becomes
    "hold": past the window the run shows the persistence forecast, which the backtest found
@@ -49,13 +54,15 @@ from velogauss.train.frequency import series_frequency
 from velogauss.train.mixing import cluster_targets, separate_patterns
 from velogauss.train.optim import acceleration_group
 from velogauss_core.constants import (BACKTEST_HEADS, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
-                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, FORM_WINDOW_FIT, RIGID_HULL_OPACITY)
+                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, FORM_WINDOW_DB, RIGID_HULL_OPACITY,
+                                      WINDOW_FRAMES)
 from velogauss_core.motion import UNDECLARED_EFFECTS
 from velogauss_fast.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import (masked, mixing_weights, motion_patterns_at,
                                                  rigid_velocity_patterns)
 from velogauss_fast.motion.trajectory import base_state
+from velogauss_fast.metrics import psnr
 
 # The candidates, from the fewest free parameters per pattern to the most: name -> (pattern
 # form, the effects it may keep of the run's). "rigid-drift" drops gravity (2 knots: 9
@@ -119,18 +126,23 @@ def choose_form(cfg, data, run, progress=False):
         heads = [float(times[last]) for last in origins(times)]
     choice = select(scores)
     form, effects = candidates(m.effects)[choice]
-    window = None if choice == "mlp" else window_fit(form, effects, times, paths, cfg, np.random.default_rng(cfg.train.seed))
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
-    future = m.future
-    if window is not None and window > FORM_WINDOW_FIT and future in ("auto", "fit"):
-        # The form forecasts but does not follow the window: the time network trains it, and
-        # the forecast is fitted to the trained paths at the end (velogauss.train.forecast).
-        form, effects, future = "mlp", m.effects, "fit"
-    elif future == "auto":
+    frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
+    future, window = m.future, None
+    if choice != "mlp" and future in ("auto", "fit"):
+        # Does the form reconstruct the window? A second probe, trained with it, against the first.
+        clock_form = time.perf_counter()
+        shaped = probe(cfg, data, run, progress, frequency, patterns=form, effects=effects, mixing_init=mixing)
+        window = {"mlp": window_psnr(model, data), choice: window_psnr(shaped, data),
+                  "probe_s": time.perf_counter() - clock_form}
+        if window[choice] < window["mlp"] - FORM_WINDOW_DB:
+            # It forecasts but does not reconstruct: the time network trains the window, and the
+            # forecast is fitted to the trained paths at the end (velogauss.train.forecast).
+            form, effects, future = "mlp", m.effects, "fit"
+    if future == "auto":
         future = "integrate" if beats_freezing(scores, choice) else "hold"
     model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects, future=future)
-    frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
-    report.update({"origins": heads, "scores": scores, "choice": choice, "window_fit": window, "patterns": form,
+    report.update({"origins": heads, "scores": scores, "choice": choice, "window_psnr": window, "patterns": form,
                    "future": future, "mixing_init": mixing, "frequency": frequency, "probe_s": probe_s,
                    "backtest_s": time.perf_counter() - clock - probe_s})
     return dataclasses.replace(cfg, model=model_cfg), report
@@ -158,14 +170,15 @@ def nothing_to_forecast(cfg):
     return dataclasses.replace(cfg, model=model_cfg), report
 
 
-def probe_config(cfg):
-    """The probe's config: `cfg` with the time network's patterns, for BACKTEST_PROBE_SHARE of its
-    iterations, every key of the schedule (SCHEDULE, "auto" or set) scaled with them (intervals
-    to at least 1), so that its window opens as the run's does; no evaluations or checkpoints."""
-    full = resolve_schedule(cfg)
+def probe_config(cfg, **model):
+    """The probe's config: `cfg` with the time network's patterns (or the `model` keys given), for
+    BACKTEST_PROBE_SHARE of its iterations, every key of the schedule (SCHEDULE, "auto" or set)
+    scaled with them (intervals to at least 1), so that its window opens as the run's does; no
+    evaluations or checkpoints."""
+    model = {"patterns": "mlp", **model}
+    full = resolve_schedule(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, **model)))
     iterations = max(1, round(BACKTEST_PROBE_SHARE * cfg.train.iterations))
-    changes = {"train": {"iterations": iterations, "eval_every": 0, "checkpoint_every": 0},
-               "model": {"patterns": "mlp"}}
+    changes = {"train": {"iterations": iterations, "eval_every": 0, "checkpoint_every": 0}, "model": model}
     for name in SCHEDULE:
         section, key = name.split(".")
         value = round(getattr(getattr(full, section), key) * iterations / cfg.train.iterations)
@@ -174,10 +187,25 @@ def probe_config(cfg):
                                        for section, values in changes.items()})
 
 
-def probe(cfg, data, run, progress=False):
-    """The probe's trained model (`probe_config`), trained in a temporary folder."""
+def probe(cfg, data, run, progress=False, frequency=None, **model):
+    """The probe's trained model (`probe_config` with the `model` keys), trained in a temporary
+    folder; `frequency`: the start of harmonic patterns where the video gives none."""
     with tempfile.TemporaryDirectory(prefix="velogauss-probe-") as folder:
-        return run(probe_config(cfg), data, folder, progress=progress)
+        return run(probe_config(cfg, **model), data, folder, progress=progress, frequency=frequency)
+
+
+def window_psnr(model, data):
+    """Mean PSNR (dB) of `model`'s renders of up to WINDOW_FRAMES of `data`'s held-out frames
+    inside the window (its interpolation split; the training frames where it has none), evenly
+    spread: how well a probe reconstructs the window."""
+    frames = data.interpolation or data.train
+    frames = [frames[int(i)] for i in np.unique(np.linspace(0, len(frames) - 1, WINDOW_FRAMES).round())]
+    ref = model.gaussians.means
+    background = torch.as_tensor(data.background, dtype=ref.dtype, device=ref.device)
+    with torch.no_grad():
+        return float(np.mean([float(psnr(model.render(f.camera, f.time, background)[0].clamp(0, 1),
+                                         torch.as_tensor(f.image, dtype=ref.dtype, device=ref.device)))
+                              for f in frames]))
 
 
 def probe_paths(model, data, rng):
@@ -241,16 +269,6 @@ def backtest(times, paths, cfg, rng):
             error = np.sqrt(((predicted - paths[last + 1:]) ** 2).sum(-1).mean())
             scores[name].append(float(error / max(spread, 1e-12)))
     return scores
-
-
-def window_fit(form, effects, times, paths, cfg, rng):
-    """How far a candidate fitted to the whole window's paths (J, M, 3) at `times` (J,) strays from
-    them when integrated from their start: RMS position error over the RMS displacement from the
-    start (0: it follows the window exactly; 1: as far off as standing still)."""
-    motion = fit(form, effects, times, paths, cfg, rng)
-    spread = np.sqrt(((paths[1:] - paths[0]) ** 2).sum(-1).mean())
-    error = np.sqrt(((predict(motion, paths[0], paths[0], times) - paths)[1:] ** 2).sum(-1).mean())
-    return float(error / max(spread, 1e-12))
 
 
 def candidate_spec(form, effects, cfg, max_time):

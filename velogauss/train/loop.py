@@ -68,15 +68,17 @@ _EVAL_FRAMES = 8
 _PSNR_EMA = 0.9
 
 
-def train(cfg, data, run_dir, resume=False, progress=True):
+def train(cfg, data, run_dir, resume=False, progress=True, frequency=None):
     """Train a VeloGauss model on `data` (velogauss.data.SceneData); return it in eval mode.
 
     cfg: velogauss.config.Config; run_dir: the run folder (config.toml, checkpoints/,
     log.jsonl); resume: continue from `run_dir`'s latest checkpoint (the config must match
     the one it was trained with, except `train.iterations`, which may grow). Sets torch's and
-    the compositing kernels' CPU threads from `train.threads` (velogauss.threads).
+    the compositing kernels' CPU threads from `train.threads` (velogauss.threads). frequency:
+    where the video gives none, the start of a new run's harmonic patterns (the backtest's probe
+    of a form passes its paths' frequency; velogauss.train.frequency.start_frequency).
     """
-    trainer, start = prepare(cfg, data, run_dir, resume, progress)
+    trainer, start = prepare(cfg, data, run_dir, resume, progress, frequency)
     trainer.run(start, progress)
     return trainer.model.eval()
 
@@ -98,7 +100,7 @@ def warn_short_schedule(train_cfg):
             f"with it.", UserWarning, stacklevel=3)
 
 
-def prepare(cfg, data, run_dir, resume=False, progress=False):
+def prepare(cfg, data, run_dir, resume=False, progress=False, frequency=None):
     """The training state of `train` before its first iteration: (Trainer, first iteration).
 
     Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `trainer.step(it)`
@@ -162,7 +164,7 @@ def prepare(cfg, data, run_dir, resume=False, progress=False):
         model = build_model(cfg, spec, points, colors, rng).to(device)
         if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, spec) == "clusters":
             separate_patterns(model.motion, model.gaussians.means, rng)
-        start_frequency(model, data.train, data.max_time, None if report is None else report["frequency"])
+        start_frequency(model, data.train, data.max_time, frequency if report is None else report["frequency"])
         start, state = 0, RunState()
         run_dir.mkdir(parents=True, exist_ok=True)
         if report is not None:
