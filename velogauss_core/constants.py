@@ -243,12 +243,13 @@ BACKTEST_LR = 3e-3
 # starts and how it moves) a pattern of its own: enough to part 3 bodies and a ground, each
 # into a few pieces, while every cluster keeps dozens of points to fit.
 BACKTEST_CLUSTERS = 8
-# A chosen form trains the window only if a probe trained with it renders the window's held-out
+# A chosen form trains the window only if a probe trained with it renders the window's training
 # frames within this many dB of the time network's probe: twice the run-to-run noise of a D-NeRF
 # scene (0.5 dB, benchmarks/FIDELITY.md 0r); a form that forecasts but reconstructs worse leaves
 # the window to the time network and forecasts past it from the trained paths (`model.future = "fit"`).
 FORM_WINDOW_DB = 1.0
-# The frames (evenly spread) whose mean PSNR says how well a probe reconstructs the window.
+# The training frames (evenly spread) whose mean PSNR says how well a probe reconstructs the window:
+# a few seconds of renders at 400 px, and a mean that one odd frame does not decide.
 WINDOW_FRAMES = 8
 # `train.warmup_views` > 1 (monocular video): the warm-up's frames never reach past this share
 # of the window, where the frozen motion would blur bodies that have moved (spec/density.md,

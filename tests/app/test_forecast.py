@@ -115,18 +115,16 @@ class _Renders:
         return (torch.zeros(1, 1, 3) if image is None else image + self.offset), None, None
 
 
-def test_the_window_psnr_scores_the_held_out_frames_inside_the_window(tmp_path):
+def test_the_window_psnr_scores_training_frames_never_the_held_out_ones(tmp_path):
     make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
     scene = load_scene(tmp_path / "toss")
-    frames = scene.interpolation
-    assert 0 < len(frames) <= WINDOW_FRAMES and all(f.time <= scene.max_time for f in frames)
-    # Every held-out frame, off by 0.1 before the renders' clamp to [0, 1]; the training frames,
-    # rendered black, are not read.
+    assert scene.interpolation and len(scene.train) > WINDOW_FRAMES
+    # Every training frame rendered exactly: the 100 dB cap; the held-out frames, rendered black, are not read.
+    assert window_psnr(_Renders(scene.train, 0.0), scene) == pytest.approx(100.0)
+    # Off by 0.1 before the renders' clamp to [0, 1]: the mean over WINDOW_FRAMES of them, evenly spread.
+    frames = [scene.train[i] for i in np.linspace(0, len(scene.train) - 1, WINDOW_FRAMES).round().astype(int)]
     expected = np.mean([10 * np.log10(1 / np.mean((np.clip(f.image - 0.1, 0, 1) - f.image) ** 2)) for f in frames])
-    assert window_psnr(_Renders(frames, -0.1), scene) == pytest.approx(expected, abs=1e-3)
-    # Without held-out frames, the training frames are scored: each rendered exactly, the 100 dB cap.
-    alone = dataclasses.replace(scene, interpolation=[])
-    assert window_psnr(_Renders(scene.train, 0.0), alone) == pytest.approx(100.0)
+    assert window_psnr(_Renders(scene.train, -0.1), scene) == pytest.approx(expected, abs=1e-3)
 
 
 def test_a_form_that_reconstructs_the_window_worse_leaves_it_to_the_time_network(tmp_path, monkeypatch):

@@ -19,7 +19,7 @@ the video alone, never from a scene's name or declared effects:
    replaces the choice only when it predicts better at every origin; the choice stands when its
    mean score is below 1, else the time network;
 5. `window_psnr`: a form that forecasts may still reconstruct the window worse; a second probe,
-   trained with the chosen form, renders the window's held-out frames, and when it scores more
+   trained with the chosen form, renders the window's training frames, and when it scores more
    than FORM_WINDOW_DB below the time network's probe the window goes to the time network and
    the form's role to the forecast fitted at the end of training (`model.future = "fit"`,
    velogauss.train.forecast). Otherwise the choice is the run's `model.patterns` (and, for a
@@ -195,10 +195,10 @@ def probe(cfg, data, run, progress=False, frequency=None, **model):
 
 
 def window_psnr(model, data):
-    """Mean PSNR (dB) of `model`'s renders of up to WINDOW_FRAMES of `data`'s held-out frames
-    inside the window (its interpolation split; the training frames where it has none), evenly
-    spread: how well a probe reconstructs the window."""
-    frames = data.interpolation or data.train
+    """Mean PSNR (dB) of `model`'s renders of WINDOW_FRAMES of `data`'s training frames, evenly
+    spread: how well a probe reconstructs the window. Training frames only: the held-out ones
+    score the run, and choosing by them would leak them into it."""
+    frames = data.train
     frames = [frames[int(i)] for i in np.unique(np.linspace(0, len(frames) - 1, WINDOW_FRAMES).round())]
     ref = model.gaussians.means
     background = torch.as_tensor(data.background, dtype=ref.dtype, device=ref.device)
