@@ -47,8 +47,9 @@ from velogauss_core.motion import Ablation
 SEED_LISTS = {"tuning": TUNING_SEEDS, "report": REPORT_SEEDS}
 # The defaults, and a model without a velocity field: the gap between them is what the physics buys.
 ABLATIONS = ("full", "deform-only")
-# The form column's mark of a run's future other than the form's own law (model.future).
-FUTURE_LABELS = {"hold": " (held)", "coast": " (coast)"}
+# The form column's mark of a run's future other than the form's own law (model.future); "fit":
+# the chosen form forecasts only, the time network trained the window (spec/motion.md, "Choosing the form").
+FUTURE_LABELS = {"hold": " (held)", "coast": " (coast)", "fit": " (forecast only)"}
 # One training seed per scene: the spread studied is the scenes', not the optimiser's.
 RUN_SEED = 0
 # numpy.percentile's method: linear interpolation between the order statistics.
