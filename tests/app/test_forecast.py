@@ -7,6 +7,7 @@ import types
 import numpy as np
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 
 from velogauss.config import load_config
 from velogauss.data import load_scene
@@ -22,12 +23,6 @@ from velogauss_core.constants import FORM_WINDOW_DB, WINDOW_FRAMES
 
 SMALL = ["model.n_patterns=4", "model.code_dim=4", "model.hidden=16", "model.depth=1"]
 T = 0.5
-
-
-def _rotation(axis, angle):
-    """(3, 3) rotation by `angle` about the unit `axis` (Rodrigues)."""
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
 def _spinning_forecast(cfg, omega, centre):
@@ -58,17 +53,12 @@ def test_past_the_window_the_forecast_moves_the_gaussians_on_from_their_state_th
             assert torch.equal(a, b)
     # Past it: the state at T turned about the centre by |omega| (t - T), whatever the window's motion did.
     x_T, q_T, s_T, _ = before[1]
-    angle = np.linalg.norm(omega) * (0.8 - T)
-    R = _rotation(omega / np.linalg.norm(omega), angle)
+    turn = Rotation.from_rotvec(omega * (0.8 - T))
     x, q, s, _ = model.state_at(0.8)
-    expected = centre + (x_T.double().numpy() - centre) @ R.T
+    expected = centre + turn.apply(x_T.double().numpy() - centre)
     np.testing.assert_allclose(x.double().numpy(), expected, atol=2e-5)
-    # The Gaussians turn with the body: q = r ⊗ q_T, r the turn's quaternion (w, x, y, z), up to sign.
-    r = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * omega / np.linalg.norm(omega)])
-    w1, v1 = r[0], r[1:]
-    qT = q_T.double().numpy()
-    turned = np.concatenate([w1 * qT[:, :1] - qT[:, 1:] @ v1[:, None],
-                             w1 * qT[:, 1:] + qT[:, :1] * v1 + np.cross(v1, qT[:, 1:])], axis=1)
+    # The Gaussians turn with the body: q = r ⊗ q_T, up to sign (scipy's quaternions are (x, y, z, w)).
+    turned = (turn * Rotation.from_quat(q_T.double().numpy()[:, [1, 2, 3, 0]])).as_quat()[:, [3, 0, 1, 2]]
     assert np.abs(np.abs((turned * q.double().numpy()).sum(1)) - 1).max() < 1e-5
     np.testing.assert_allclose(s.numpy(), s_T.numpy(), rtol=1e-5)
     # The velocity past the window is the forecast's: omega x (x - c).

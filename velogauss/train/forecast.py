@@ -37,10 +37,8 @@ def fit_forecast(model, data, cfg, rng):
         future = "fit"
         form, effects = candidates(cfg.model.effects)[choice]
         motion = fit(form, effects, times, paths, cfg, rng).to(model.gaussians.means.device)
-    model.set_forecast(None)
     model.spec = dataclasses.replace(model.spec, future=future)
-    if future == "fit":
-        model.set_forecast(motion.requires_grad_(False))
+    model.set_forecast(motion.requires_grad_(False) if future == "fit" else None)
     return {"scores": scores, "choice": choice, "future": future, "points": int(paths.shape[1]),
             "times": [float(t) for t in times]}
 
