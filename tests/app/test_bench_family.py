@@ -65,6 +65,10 @@ def study(tmp_path):
     for seed, extrap in ((1, 20.0), (3, 21.0)):
         write_json(tmp_path / f"random-{seed}-deform-only-s0" / "metrics.json", metrics_json(extrap))
     write_json(tmp_path / "random-3-full-s0" / "motion_form.json", {"choice": "rigid-gravity", "scores": {}})
+    # Seed 7: the backtest chose harmonic, the time network trained the window, a rigid forecast was fitted.
+    write_json(tmp_path / "random-7-full-s0" / "motion_form.json",
+               {"choice": "harmonic", "patterns": "mlp", "future": "fit", "scores": {}})
+    write_json(tmp_path / "random-7-full-s0" / "forecast.json", {"choice": "rigid", "future": "fit", "scores": {}})
     return tmp_path
 
 
@@ -86,7 +90,8 @@ def test_table_rows_spreads_and_targets(study):
                            "31.00", "22.00", "23.00", "-1.00", "20.00", "+2.00", "—"]
     assert rows[1][5:] == ["0.040", "0.080", "0.030", "0.050", "0.200", "0.300",
                            "30.00", "25.00", "18.00", "+7.00", "21.00", "+4.00", "rigid-gravity"]
-    assert rows[2][5:] == ["0.100", "0.120", "—", "—", "—", "—", "33.00", "28.00", "20.00", "+8.00", "—", "—", "—"]
+    assert rows[2][5:] == ["0.100", "0.120", "—", "—", "—", "—", "33.00", "28.00", "20.00", "+8.00", "—", "—",
+                           "mlp, forecast rigid"]
     # Linear percentiles of n sorted values: position q/100 (n - 1). Of 3 values the 90th lies at 1.8
     # (0.8 of the way from the 2nd to the 3rd), the 10th at 0.2; of 2 values at 0.9 and 0.1.
     spreads = {(r[0], r[1]): r[2:] for r in section_rows(text, "Distribution")}
@@ -124,6 +129,21 @@ def test_table_rows_spreads_and_targets(study):
     assert [m for m in missing if m.startswith(str(study))] == [
         str(study / name) for name in ("random-7-deform-only-s0", "random-9-full-s0", "random-9-deform-only-s0")]
     assert 'method="linear"' in text
+
+
+@pytest.mark.parametrize("report, forecast, label", [
+    ({}, {}, None),
+    ({"choice": "mlp", "future": "hold"}, {}, "mlp (held)"),
+    ({"choice": "rigid", "future": "integrate"}, {}, "rigid"),
+    ({"choice": "harmonic", "patterns": "mlp", "future": "fit"}, {"choice": "mlp", "future": "integrate"},
+     "mlp, forecast mlp"),
+    ({"choice": "rigid", "patterns": "mlp", "future": "fit"}, {"choice": "harmonic", "future": "hold"},
+     "mlp, forecast held"),
+    # A future the user set to "fit": the form trained the window, and a forecast not yet fitted shows as such.
+    ({"choice": "rigid", "patterns": "rigid", "future": "fit"}, {}, "rigid, forecast —"),
+])
+def test_form_label(report, forecast, label):
+    assert family.form_label(report, forecast) == label
 
 
 def test_table_without_data_or_runs(tmp_path):

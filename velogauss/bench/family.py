@@ -18,7 +18,8 @@ metrics.json (`velogauss.evaluate.evaluate_model`'s result) into one row per sce
 - the deform-only run's extrapolation PSNR: what the velocity field buys over a deformation
   network alone;
 - the run folder's `motion_form.json` `choice` (`model.patterns = "auto"`), when written, marked
-  "(held)" when its `future` is "hold", "(coast)" when "coast".
+  "(held)" when its `future` is "hold", "(coast)" when "coast"; when "fit", the form that trained
+  the window and the forecast that `forecast.json` says was fitted after it (`form_label`).
 
 `velogauss bench family translation-only --seeds S` scores each scene's own translation-only
 velocity error from its drawn parameters (`translation_only`): the floor that the velocity
@@ -47,9 +48,11 @@ from velogauss_core.motion import Ablation
 SEED_LISTS = {"tuning": TUNING_SEEDS, "report": REPORT_SEEDS}
 # The defaults, and a model without a velocity field: the gap between them is what the physics buys.
 ABLATIONS = ("full", "deform-only")
-# The form column's mark of a run's future other than the form's own law (model.future); "fit":
-# the chosen form forecasts only, the time network trained the window (spec/motion.md, "Choosing the form").
-FUTURE_LABELS = {"hold": " (held)", "coast": " (coast)", "fit": " (forecast only)"}
+# The form column's mark of a run's future other than the form's own law (model.future; "fit" is
+# spelt out by `form_label`).
+FUTURE_LABELS = {"hold": " (held)", "coast": " (coast)"}
+# The form column's name of a forecast's future (forecast.json, spec/motion.md, "The future past the window").
+FORECAST_LABELS = {"hold": "held", "integrate": "mlp"}
 # One training seed per scene: the spread studied is the scenes', not the optimiser's.
 RUN_SEED = 0
 # numpy.percentile's method: linear interpolation between the order statistics.
@@ -212,6 +215,19 @@ def collect(out):
     return rows, missing
 
 
+def form_label(report, forecast):
+    """The form column of a run from its motion_form.json and forecast.json dicts ({} when absent):
+    the backtest's choice, with a held or coasting future marked (part of what the run chose);
+    where the future was fitted after training ("fit", spec/motion.md, "Choosing the form"), the
+    patterns that trained the window and the forecast: "mlp, forecast rigid". None: no choice."""
+    if "choice" not in report:
+        return None
+    if report.get("future") != "fit":
+        return report["choice"] + FUTURE_LABELS.get(report.get("future"), "")
+    fitted = FORECAST_LABELS.get(forecast.get("future"), forecast.get("choice", "—"))
+    return f"{report.get('patterns', report['choice'])}, forecast {fitted}"
+
+
 def scene_row(scene, full_run, deform_run):
     """One scene's row from its scene.json dict and its runs' folders (the deform-only may be absent)."""
     metrics = json.loads((full_run / "metrics.json").read_text())
@@ -221,10 +237,8 @@ def scene_row(scene, full_run, deform_run):
     deform = deform_run / "metrics.json"
     deform_extrap = _at(json.loads(deform.read_text()), "splits", "extrapolation", "mean", "psnr") \
         if deform.is_file() else None
-    form_file = full_run / "motion_form.json"
-    report = json.loads(form_file.read_text()) if form_file.is_file() else {}
-    # A held future (no form beat freezing, model.future "auto") is part of what the run chose.
-    form = None if "choice" not in report else report["choice"] + FUTURE_LABELS.get(report.get("future"), "")
+    form = form_label(*(json.loads(path.read_text()) if path.is_file() else {}
+                        for path in (full_run / "motion_form.json", full_run / "forecast.json")))
     return {"seed": scene["family"]["seed"], "kinds": tuple(params["kinds"]), "rig": params["rig"],
             "px": scene["generator"]["resolution"][0], "frames": scene["generator"]["n_times"],
             "vel_obs": _at(metrics, "motion", "velocity", "observed", "relative_l2"),
