@@ -225,7 +225,7 @@ def form_label(report, forecast):
     if report.get("future") != "fit":
         return report["choice"] + FUTURE_LABELS.get(report.get("future"), "")
     fitted = FORECAST_LABELS.get(forecast.get("future"), forecast.get("choice", "—"))
-    return f"{report.get('patterns', report['choice'])}, forecast {fitted}"
+    return f"{report['patterns']}, forecast {fitted}"
 
 
 def scene_row(scene, full_run, deform_run):
