@@ -290,6 +290,19 @@ def dnerf_command(
         typer.echo(dnerf.table(sweep, write), nl=False)
 
 
+@bench_app.command("dnerf-future")
+def dnerf_future_command(
+    sweep: Path = typer.Argument(..., help="The folder of `velogauss sweep benchmarks/grids/dnerf_future.toml`."),
+    write: Optional[Path] = typer.Option(None, "--write", help="Also write the Markdown to this file."),
+):
+    """The D-NeRF extrapolation table of a finished sweep: full, deformation-only and the frozen frame beside
+    ODE-GS's published mean (Markdown)."""
+    from velogauss.bench import dnerf_future
+
+    with user_errors():
+        typer.echo(dnerf_future.table(sweep, write), nl=False)
+
+
 family_app = typer.Typer(
     help="The scene family's study (velogauss.bench.family): `scenes` renders seeds' scenes and their sweep "
          "grid, `table` the per-scene scores, their spread by kind of motion and the targets, `translation-only` "
