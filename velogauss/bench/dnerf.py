@@ -59,16 +59,16 @@ def run_row(run_dir):
     lines = [line for line in (run_dir / "log.jsonl").read_text().splitlines() if line.strip()]
     last = json.loads(lines[-1]) if lines else {}
     peak = last.get("peak_rss_mib")
-    return {"psnr": _mean([f.get("psnr") for f in test]), "ssim": _mean([f.get("ssim") for f in test]),
-            "lpips": _mean([f.get("lpips_vgg") for f in test]),
+    return {"psnr": mean([f.get("psnr") for f in test]), "ssim": mean([f.get("ssim") for f in test]),
+            "lpips": mean([f.get("lpips_vgg") for f in test]),
             "gaussians": last.get("n_gaussians"),
             "minutes": None if "elapsed_s" not in last else last["elapsed_s"] / 60.0,
             "peak_gb": None if peak is None else peak / 1024}
 
 
-def collect(sweep_dir):
-    """{(scene, ablation): run_row or None} for the grid's runs `<scene>-<ablation>-s0`."""
-    return {(scene, ablation): run_row(Path(sweep_dir) / f"{scene}-{ablation}-s0")
+def collect(sweep_dir, row=run_row):
+    """{(scene, ablation): row(run folder), None when unfinished} for the grid's runs `<scene>-<ablation>-s0`."""
+    return {(scene, ablation): row(Path(sweep_dir) / f"{scene}-{ablation}-s0")
             for scene in SCENES for ablation in ABLATIONS}
 
 
@@ -84,8 +84,8 @@ def markdown(rows):
                  for k, _, d in COLUMNS]
         cells += [markdown_cell(v, d) for name in PUBLISHED for v, d in zip(PUBLISHED[name][scene], PUBLISHED_FORMATS)]
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
-    means = [markdown_cell(_mean([rows[s, a][k] for s in complete]), d) for a in ABLATIONS for k, _, d in COLUMNS]
-    means += [markdown_cell(_mean([PUBLISHED[name][s][i] for s in complete]), d) for name in PUBLISHED
+    means = [markdown_cell(mean([rows[s, a][k] for s in complete]), d) for a in ABLATIONS for k, _, d in COLUMNS]
+    means += [markdown_cell(mean([PUBLISHED[name][s][i] for s in complete]), d) for name in PUBLISHED
               for i, d in enumerate(PUBLISHED_FORMATS)]
     lines.append(f"| **mean** ({len(complete)} scenes) | " + " | ".join(means) + " |")
     return "\n".join(lines) + "\n"
@@ -94,17 +94,22 @@ def markdown(rows):
 def table(sweep_dir, write=None):
     """`velogauss bench dnerf`: the Markdown for the sweep folder `sweep_dir` (also into `write`,
     atomically). FileNotFoundError naming the folder when it holds no finished run of the grid."""
-    rows = collect(sweep_dir)
+    return write_table(collect(sweep_dir), markdown, "benchmarks/grids/dnerf_standard.toml", sweep_dir, write)
+
+
+def write_table(rows, render, grid, sweep_dir, write=None):
+    """`render(rows)`, also into `write` (atomically); FileNotFoundError naming `sweep_dir` when no
+    run of the `grid` file finished (every row None)."""
     if all(row is None for row in rows.values()):
-        raise FileNotFoundError(2, "no finished run of benchmarks/grids/dnerf_standard.toml (run `velogauss sweep` "
-                                "on it first)", str(sweep_dir))
-    text = markdown(rows)
+        raise FileNotFoundError(2, f"no finished run of {grid} (run `velogauss sweep` on it first)", str(sweep_dir))
+    text = render(rows)
     if write is not None:
         write_text(write, text)
     return text
 
 
-def _mean(values):
+def mean(values):
+    """The mean of the values that are not None; None when none is."""
     values = [v for v in values if v is not None]
     return float(np.mean(values)) if values else None
 

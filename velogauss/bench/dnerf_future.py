@@ -19,14 +19,10 @@ reports the frozen frame.
 import json
 from pathlib import Path
 
-import numpy as np
-
-from velogauss.bench.dnerf import SCENES
+from velogauss.bench.dnerf import ABLATIONS, SCENES, collect, mean, write_table
 from velogauss.bench.family import form_label
 from velogauss.bench.harness import markdown_cell
-from velogauss.io_utils import write_text
 
-ABLATIONS = ("full", "deform-only")
 # Mean extrapolation PSNR (dB) over the 8 scenes at 800 px, second-hand (module docstring).
 ANCHORS = {"ODE-GS (800 px, second-hand)": 27.30, "GaussianPrediction, re-run by ODE-GS (800 px, second-hand)": 23.09}
 # The PSNR columns of one ablation: (key, header).
@@ -52,12 +48,6 @@ def run_row(run_dir):
             "minutes": None if "elapsed_s" not in last else (last["elapsed_s"] + probes) / 60.0}
 
 
-def collect(sweep_dir):
-    """{(scene, ablation): run_row or None} for the grid's runs `<scene>-<ablation>-s0`."""
-    return {(scene, ablation): run_row(Path(sweep_dir) / f"{scene}-{ablation}-s0")
-            for scene in SCENES for ablation in ABLATIONS}
-
-
 def markdown(rows):
     """The table of `collect`'s rows, its mean row, the count below the frozen frame and the anchors."""
     head = ["scene", "window, forecast", *(f"full: {h}" for _, h in PSNRS), "full: extrap − frozen",
@@ -67,9 +57,9 @@ def markdown(rows):
     for scene in SCENES:
         full, deform = rows[scene, "full"], rows[scene, "deform-only"]
         lines.append(f"| {scene} | {(full or {}).get('form') or '—'} | " + " | ".join(_cells(full, deform)) + " |")
-    mean = {a: {k: _mean([rows[s, a][k] for s in complete]) for k, _ in PSNRS} for a in ABLATIONS}
+    means = {a: {k: mean([rows[s, a][k] for s in complete]) for k, _ in PSNRS} for a in ABLATIONS}
     lines.append(f"| **mean** ({len(complete)} scenes) | | "
-                 + " | ".join(_cells(mean["full"], mean["deform-only"], counts=False)) + " | | |")
+                 + " | ".join(_cells(means["full"], means["deform-only"], counts=False)) + " | | |")
     for name, extrap in ANCHORS.items():
         lines.append(f"| {name} | | | {extrap:.2f} |" + " |" * (len(head) - 4))
     below = [s for s in complete if rows[s, "full"]["extrap"] < rows[s, "full"]["frozen"]]
@@ -82,14 +72,7 @@ def table(sweep_dir, write=None):
     """`velogauss bench dnerf-future`: the Markdown for the sweep folder `sweep_dir` (also into
     `write`, atomically). FileNotFoundError naming the folder when it holds no finished run of
     the grid."""
-    rows = collect(sweep_dir)
-    if all(row is None for row in rows.values()):
-        raise FileNotFoundError(2, "no finished run of benchmarks/grids/dnerf_future.toml (run `velogauss sweep` "
-                                "on it first)", str(sweep_dir))
-    text = markdown(rows)
-    if write is not None:
-        write_text(write, text)
-    return text
+    return write_table(collect(sweep_dir, run_row), markdown, "benchmarks/grids/dnerf_future.toml", sweep_dir, write)
 
 
 def _cells(full, deform, counts=True):
@@ -113,8 +96,3 @@ def _psnr(metrics, *keys):
 
 def _difference(a, b):
     return None if a is None or b is None else a - b
-
-
-def _mean(values):
-    values = [v for v in values if v is not None]
-    return float(np.mean(values)) if values else None
