@@ -229,6 +229,12 @@ def motion_form_line(run_dir):
         window = report["window_psnr"]
         future = (f"a probe trained with it reconstructs the window at {window[report['choice']]:.2f} dB against the "
                   f"time network's {window['mlp']:.2f}, so the time network trains the window; {future}")
+    elif "first_scores" in report:  # the window was the time network's, the oscillators reconstruct it better
+        window = report["window_psnr"]
+        first = report.get("first_choice", "mlp")
+        future = (f"the first probe's paths chose {'the time network' if first == 'mlp' else first}, but a probe "
+                  f"with the oscillators reconstructs the window at {window['harmonic']:.2f} dB against the time "
+                  f"network's {window['mlp']:.2f}, and the scores are of the oscillators' own paths; {future}")
     return f"motion form: {report['choice']}{scored}; {future}"
 
 

@@ -248,6 +248,11 @@ BACKTEST_CLUSTERS = 8
 # scene (0.5 dB, benchmarks/FIDELITY.md 0r); a form that forecasts but reconstructs worse leaves
 # the window to the time network and forecasts past it from the trained paths (`model.future = "fit"`).
 FORM_WINDOW_DB = 1.0
+# Where the backtest picks the time network, the oscillators' probe takes the window only if it renders
+# the window this many dB better (a quarter of the squared error): a time network that learned no
+# motion that reverses was 7.5-12.6 dB behind on the tuning scenes, while a 2.0 dB gap taken cost
+# a tuning scene 3.8 dB past its window (benchmarks/FIDELITY.md, 0v).
+OSCILLATOR_WINDOW_DB = 6.0
 # The training frames (evenly spread) whose mean PSNR says how well a probe reconstructs the window:
 # a few seconds of renders at 400 px, and a mean that one odd frame does not decide.
 WINDOW_FRAMES = 8

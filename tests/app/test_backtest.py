@@ -142,14 +142,15 @@ def test_a_choice_is_written_into_the_config_and_never_read_from_the_scene(tiny_
     shapes = []
 
     def probe_run(probe_cfg, data, folder, progress=True, frequency=None):
-        # The time network's first; a second only to see whether a chosen form reconstructs the window.
+        # The time network's first; a second to see whether a chosen form reconstructs the window,
+        # or, where the time network was chosen, whether the oscillators reconstruct it better.
         shapes.append(probe_cfg.model.patterns)
         assert shapes[0] == "mlp" and len(shapes) <= 2 and probe_cfg.train.iterations == 10
         from velogauss.train.loop import train
         return train(probe_cfg, data, folder, progress=progress, frequency=frequency)
 
     chosen, report = choose_form(cfg, tiny_scene, probe_run)
-    assert len(shapes) == (1 if report["choice"] == "mlp" else 2)
+    assert len(shapes) == 2 and shapes[1] == (CANDIDATES[report["choice"]][0] if report["choice"] != "mlp" else "harmonic")
     assert chosen.model.patterns in {"mlp", "rigid", "harmonic"}
     assert report["choice"] in CANDIDATES and chosen.model.mixing_init in {"uniform", "clusters"}
     # The future follows the report's scores: held exactly when the choice did not beat freezing.

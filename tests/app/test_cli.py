@@ -173,6 +173,15 @@ def test_the_command_says_what_was_chosen_and_whether_the_future_holds(tmp_path)
     assert motion_form_line(tmp_path) == ("motion form: mlp (tail scores 0.60 / 0.70 / 0.80; 1 = freezing); the "
                                           "motion coasts past the window: its patterns keep their value at the "
                                           "window's end")
+    report.update(choice="harmonic", patterns="harmonic", scores={"harmonic": [0.4, 0.5, 0.45]}, future="integrate",
+                  first_scores={"mlp": [0.6, 0.7, 0.8]}, first_choice="rigid-drift",
+                  window_psnr={"mlp": 19.1, "rigid-drift": 18.0, "harmonic": 33.25, "probe_s": 60.0})
+    (tmp_path / "motion_form.json").write_text(json.dumps(report))
+    assert motion_form_line(tmp_path) == ("motion form: harmonic (tail scores 0.40 / 0.50 / 0.45; 1 = freezing); the "
+                                          "first probe's paths chose rigid-drift, but a probe with the oscillators "
+                                          "reconstructs the window at 33.25 dB against the time network's 19.10, and "
+                                          "the scores are of the oscillators' own paths; the motion is integrated past "
+                                          "the window")
     (tmp_path / "motion_form.json").write_text(json.dumps({"choice": "mlp", "scores": {}, "future": "integrate",
                                                            "reason": "the observed window reaches t = 1"}))
     assert motion_form_line(tmp_path) == "motion form: mlp (the observed window reaches t = 1)"

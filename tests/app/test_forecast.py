@@ -19,7 +19,7 @@ from velogauss.train import backtest as backtest_module
 from velogauss.train.backtest import candidate_spec, candidates, choose_form, window_psnr
 from velogauss.train.checkpoint import load_model
 from velogauss.train.loop import train
-from velogauss_core.constants import FORM_WINDOW_DB, WINDOW_FRAMES
+from velogauss_core.constants import FORM_WINDOW_DB, OSCILLATOR_WINDOW_DB, WINDOW_FRAMES
 
 SMALL = ["model.n_patterns=4", "model.code_dim=4", "model.hidden=16", "model.depth=1"]
 T = 0.5
@@ -146,3 +146,74 @@ def test_a_form_that_reconstructs_the_window_worse_leaves_it_to_the_time_network
     probes.clear()
     kept = load_config(None, [*SMALL, "train.iterations=30", "model.future=integrate"])
     assert choose_form(kept, scene, probe)[0].model.patterns == "rigid" and probes == ["mlp"]
+
+
+@pytest.mark.parametrize(("harmonic_db", "tail", "patterns", "future"), [
+    (35.0 + OSCILLATOR_WINDOW_DB + 0.5, 0.5, "harmonic", "integrate"),  # the oscillators reconstruct it better
+    (35.0 + OSCILLATOR_WINDOW_DB + 0.5, 1.2, "harmonic", "hold"),  # ... but their paths forecast worse than freezing
+    (35.0 + OSCILLATOR_WINDOW_DB - 0.5, 0.5, "mlp", "integrate"),  # within the margin: the time network's window
+])
+def test_a_window_the_time_network_was_chosen_for_goes_to_the_oscillators_if_they_reconstruct_it_better(
+        tmp_path, monkeypatch, harmonic_db, tail, patterns, future):
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
+    scene = load_scene(tmp_path / "toss")
+    times = np.linspace(0.0, 0.5, 8)
+    # Each probe's paths tell which probe they came from, and the backtest scores them accordingly.
+    monkeypatch.setattr(backtest_module, "probe_paths",
+                        lambda model, data, rng: (times, np.full((8, 60, 3), model.db)))
+    first = {"rigid": [1.5] * 3, "harmonic": [1.3] * 3, "mlp": [0.6] * 3}
+    second = {"rigid": [1.5] * 3, "harmonic": [tail] * 3, "mlp": [0.9] * 3}
+    monkeypatch.setattr(backtest_module, "backtest",
+                        lambda times, paths, *args: first if paths[0, 0, 0] == 35.0 else second)
+    monkeypatch.setattr(backtest_module, "window_psnr", lambda model, data: model.db)
+    probes = []
+
+    def probe(cfg, data, folder, progress=False, frequency=None):
+        probes.append(cfg.model.patterns)
+        return types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool),
+                                     db=35.0 if cfg.model.patterns == "mlp" else harmonic_db)
+
+    cfg = load_config(None, [*SMALL, "train.iterations=30"])
+    chosen, report = choose_form(cfg, scene, probe)
+    assert probes == ["mlp", "harmonic"] and report["window_psnr"]["harmonic"] == harmonic_db
+    assert (chosen.model.patterns, chosen.model.future, report["future"]) == (patterns, future, future)
+    assert report["choice"] == patterns
+    if patterns == "harmonic":  # the oscillators' own paths scored the future; the first probe's are kept
+        assert report["scores"] is second and report["first_scores"] is first
+    else:
+        assert report["scores"] is first and "first_scores" not in report
+    # A future the user set: no second probe, the time network.
+    probes.clear()
+    kept = load_config(None, [*SMALL, "train.iterations=30", "model.future=integrate"])
+    assert choose_form(kept, scene, probe)[0].model.patterns == "mlp" and probes == ["mlp"]
+
+
+def test_a_window_a_form_lost_to_the_time_network_goes_to_the_oscillators_if_they_reconstruct_it_better(
+        tmp_path, monkeypatch):
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
+    scene = load_scene(tmp_path / "toss")
+    times = np.linspace(0.0, 0.5, 8)
+    monkeypatch.setattr(backtest_module, "probe_paths",
+                        lambda model, data, rng: (times, np.full((8, 60, 3), model.db)))
+    first = {"rigid-drift": [0.8] * 3, "rigid": [1.5] * 3, "harmonic": [0.9] * 3, "mlp": [0.85] * 3}
+    second = {"rigid-drift": [1.5] * 3, "rigid": [1.5] * 3, "harmonic": [0.2] * 3, "mlp": [0.9] * 3}
+    monkeypatch.setattr(backtest_module, "backtest",
+                        lambda times, paths, *args: first if paths[0, 0, 0] == 23.0 else second)
+    monkeypatch.setattr(backtest_module, "window_psnr", lambda model, data: model.db)
+    probes = []
+    dbs = {"mlp": 23.0, "rigid": 20.0, "harmonic": 23.0 + OSCILLATOR_WINDOW_DB + 0.5}
+
+    def probe(cfg, data, folder, progress=False, frequency=None):
+        probes.append(cfg.model.patterns)
+        return types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool), db=dbs[cfg.model.patterns])
+
+    cfg = load_config(None, [*SMALL, "train.iterations=30"])
+    chosen, report = choose_form(cfg, scene, probe)
+    # rigid-drift forecast the first paths best but reconstructed the window worse than the time
+    # network; the oscillators reconstruct it better than both, and their paths forecast.
+    assert probes == ["mlp", "rigid", "harmonic"]
+    assert report["window_psnr"] == {"mlp": 23.0, "rigid-drift": 20.0, "harmonic": dbs["harmonic"],
+                                     "probe_s": report["window_psnr"]["probe_s"]}
+    assert (chosen.model.patterns, chosen.model.future, report["choice"], report["first_choice"]) == (
+        "harmonic", "integrate", "harmonic", "rigid-drift")
+    assert report["scores"] is second and report["first_scores"] is first

@@ -24,7 +24,11 @@ the video alone, never from a scene's name or declared effects:
    the form's role to the forecast fitted at the end of training (`model.future = "fit"`,
    velogauss.train.forecast). Otherwise the choice is the run's `model.patterns` (and, for a
    drifting rigid centre, its effects without gravity); the run then trains from scratch with
-   it, as if it had been set. When no candidate beat freezing, `model.future = "auto"` becomes
+   it, as if it had been set. Where the window is the time network's (chosen, or left to it by a
+   rigid form), whose probe may have learned no motion that reverses and so left paths that show
+   none, a probe with the oscillators is trained; when it renders the window more than
+   OSCILLATOR_WINDOW_DB above the time network's probe, the oscillators train the window and the
+   backtest runs again on their probe's paths, whose scores decide the future. When no candidate beat freezing, `model.future = "auto"` becomes
    "hold": past the window the run shows the persistence forecast, which the backtest found
    best. config.toml records both, and the run folder's `motion_form.json` holds every
    candidate's scores.
@@ -54,8 +58,8 @@ from velogauss.train.frequency import series_frequency
 from velogauss.train.mixing import cluster_targets, separate_patterns
 from velogauss.train.optim import acceleration_group
 from velogauss_core.constants import (BACKTEST_HEADS, BACKTEST_CLUSTERS, BACKTEST_LR, BACKTEST_MAX_TIMES, BACKTEST_POINTS,
-                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, FORM_WINDOW_DB, RIGID_HULL_OPACITY,
-                                      WINDOW_FRAMES)
+                                      BACKTEST_PROBE_SHARE, BACKTEST_STEPS, FORM_WINDOW_DB, OSCILLATOR_WINDOW_DB,
+                                      RIGID_HULL_OPACITY, WINDOW_FRAMES)
 from velogauss_core.motion import UNDECLARED_EFFECTS
 from velogauss_fast.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_fast.motion.code import physics_code
@@ -129,7 +133,8 @@ def choose_form(cfg, data, run, progress=False):
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
     frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1])) if moved else None
     future, window = m.future, None
-    if choice != "mlp" and future in ("auto", "fit"):
+    asks = future in ("auto", "fit")
+    if choice != "mlp" and asks:
         # Does the form reconstruct the window? A second probe, trained with it, against the first.
         clock_form = time.perf_counter()
         shaped = probe(cfg, data, run, progress, frequency, patterns=form, effects=effects, mixing_init=mixing)
@@ -139,6 +144,24 @@ def choose_form(cfg, data, run, progress=False):
             # It forecasts but does not reconstruct: the time network trains the window, and the
             # forecast is fitted to the trained paths at the end (velogauss.train.forecast).
             form, effects, future = "mlp", m.effects, "fit"
+    if asks and form == "mlp" and CANDIDATES[choice][0] != "harmonic" and "harmonic" in candidates(m.effects):
+        # A time network that learned no motion which reverses (an oscillation) leaves paths that
+        # show none, or a form fitted to them: a probe with the oscillators asks the images instead.
+        clock_form = time.perf_counter()
+        shaped = probe(cfg, data, run, progress, frequency, patterns="harmonic", effects=m.effects,
+                       mixing_init=mixing)
+        window = {"probe_s": 0.0, **(window or {"mlp": window_psnr(model, data)}),
+                  "harmonic": window_psnr(shaped, data)}
+        window["probe_s"] += time.perf_counter() - clock_form
+        if window["harmonic"] > window["mlp"] + OSCILLATOR_WINDOW_DB:
+            # The oscillators train the window; their probe's paths, not the first's, say whether
+            # they forecast better than freezing.
+            times, paths = probe_paths(shaped, data, np.random.default_rng(cfg.train.seed))
+            report["first_scores"], report["first_choice"], scores = scores, choice, {}
+            if paths.shape[1] > 0 and len(times) >= 4:
+                scores = backtest(times, paths, cfg, np.random.default_rng(cfg.train.seed))
+                frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1]))
+            choice, form, effects, future = "harmonic", "harmonic", m.effects, m.future
     if future == "auto":
         future = "integrate" if beats_freezing(scores, choice) else "hold"
     model_cfg = dataclasses.replace(m, patterns=form, mixing_init=mixing, effects=effects, future=future)
