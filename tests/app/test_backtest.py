@@ -106,6 +106,14 @@ def test_the_backtest_prefers_the_form_the_paths_were_made_with(paths, expected)
     assert max(scores[select(scores)]) < 0.5
 
 
+@pytest.mark.parametrize("n_times, n_paths", [(3, 10), (16, 0)], ids=["no-tail", "nothing-moved"])
+def test_the_backtest_scores_nothing_without_a_tail_or_a_path(n_times, n_paths):
+    times = np.linspace(0.0, 0.75, n_times)
+    paths = _tossed(times)[0][:, :n_paths]
+    scores = backtest(times, paths, load_config(None, SMALL), np.random.default_rng(0))
+    assert scores == {} and select(scores) == "mlp" and not beats_freezing(scores, "mlp")
+
+
 def test_a_richer_form_is_chosen_only_when_it_predicts_better_at_every_origin():
     # The default scene's seed 1 at one origin: oscillators 0.258 against rigid 0.270.
     scores = {"rigid-drift": [0.43, 0.65, 0.72], "rigid": [0.30, 0.29, 0.27], "harmonic": [0.37, 0.30, 0.26],

@@ -123,11 +123,9 @@ def choose_form(cfg, data, run, progress=False):
     if mixing == "auto":
         # Still Gaussians beside moving ones: more than one motion to tell apart from the start.
         mixing = "clusters" if 0.0 < moving_share < 1.0 else "uniform"
-    scores, heads = {}, []
+    scores = backtest(times, paths, cfg, np.random.default_rng(cfg.train.seed))
+    heads = [float(times[last]) for last in origins(times)] if scores else []
     moved = paths.shape[1] > 0
-    if moved and len(times) >= 4:  # else nothing moved, or there is no tail to hold out
-        scores = backtest(times, paths, cfg, np.random.default_rng(cfg.train.seed))
-        heads = [float(times[last]) for last in origins(times)]
     choice = select(scores)
     form, effects = candidates(m.effects)[choice]
     effects = m.effects if choice == "mlp" or form == "harmonic" else effects
@@ -157,9 +155,9 @@ def choose_form(cfg, data, run, progress=False):
             # The oscillators train the window; their probe's paths, not the first's, say whether
             # they forecast better than freezing.
             times, paths = probe_paths(shaped, data, np.random.default_rng(cfg.train.seed))
-            report["first_scores"], report["first_choice"], scores = scores, choice, {}
-            if paths.shape[1] > 0 and len(times) >= 4:
-                scores = backtest(times, paths, cfg, np.random.default_rng(cfg.train.seed))
+            report["first_scores"], report["first_choice"] = scores, choice
+            scores = backtest(times, paths, cfg, np.random.default_rng(cfg.train.seed))
+            if scores:
                 frequency = series_frequency(times, paths.reshape(len(times), -1), float(times[-1]))
             choice, form, effects, future = "harmonic", "harmonic", m.effects, m.future
     if future == "auto":
@@ -281,8 +279,11 @@ def origins(times):
 
 def backtest(times, paths, cfg, rng):
     """{candidate: [tail score per origin]} (module docstring, step 3) for the paths (J, M, 3) at
-    J >= 4 `times`: at each origin (`origins`) each candidate is fitted on the head, then
-    integrated from the head's last positions over the rest."""
+    J `times`: at each origin (`origins`) each candidate is fitted on the head, then integrated
+    from the head's last positions over the rest. Empty when nothing moved (M = 0) or there is
+    no tail to hold out (J < 4)."""
+    if paths.shape[1] == 0 or len(times) < 4:
+        return {}
     scores = {name: [] for name in candidates(cfg.model.effects)}
     for last in origins(times):
         spread = np.sqrt(((paths[last + 1:] - paths[last]) ** 2).sum(-1).mean())

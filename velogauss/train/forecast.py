@@ -27,7 +27,7 @@ def fit_forecast(model, data, cfg, rng):
     the future it set ("fit", "integrate" or "hold"). cfg: the run's Config; rng: NumPy Generator
     of the paths' subset and the fits."""
     times, paths = probe_paths(model, data, rng)
-    scores = backtest(times, paths, cfg, rng) if paths.shape[1] > 0 and len(times) >= 4 else {}
+    scores = backtest(times, paths, cfg, rng)
     choice = select(scores)
     if not beats_freezing(scores, choice):
         future = "hold"
