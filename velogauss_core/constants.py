@@ -248,7 +248,7 @@ BACKTEST_CLUSTERS = 8
 # scene (0.5 dB, benchmarks/FIDELITY.md 0r); a form that forecasts but reconstructs worse leaves
 # the window to the time network and forecasts past it from the trained paths (`model.future = "fit"`).
 FORM_WINDOW_DB = 1.0
-# Where the backtest picks the time network, the oscillators' probe takes the window only if it renders
+# Where the window is the time network's, the oscillators' probe takes the window only if it renders
 # the window this many dB better (a quarter of the squared error): a time network that learned no
 # motion that reverses was 7.5-12.6 dB behind on the tuning scenes, while a 2.0 dB gap taken cost
 # a tuning scene 3.8 dB past its window (benchmarks/FIDELITY.md, 0v).

@@ -148,6 +148,28 @@ def test_a_form_that_reconstructs_the_window_worse_leaves_it_to_the_time_network
     assert choose_form(kept, scene, probe)[0].model.patterns == "rigid" and probes == ["mlp"]
 
 
+def _stubbed_probes(tmp_path, monkeypatch, first, second, first_db, dbs):
+    """A small scene, and choose_form's probes, paths, backtest and window PSNR stubbed: each
+    probe's model carries its window PSNR `dbs(patterns)`, its paths carry that PSNR, and the
+    backtest scores paths of `first_db` (the time network's) as `first`, the others as `second`.
+    Returns (scene, probe, probes: the patterns each probe was trained with)."""
+    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
+    scene = load_scene(tmp_path / "toss")
+    times = np.linspace(0.0, 0.5, 8)
+    monkeypatch.setattr(backtest_module, "probe_paths",
+                        lambda model, data, rng: (times, np.full((8, 60, 3), model.db)))
+    monkeypatch.setattr(backtest_module, "backtest",
+                        lambda times, paths, *args: first if paths[0, 0, 0] == first_db else second)
+    monkeypatch.setattr(backtest_module, "window_psnr", lambda model, data: model.db)
+    probes = []
+
+    def probe(cfg, data, folder, progress=False, frequency=None):
+        probes.append(cfg.model.patterns)
+        return types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool), db=dbs(cfg.model.patterns))
+
+    return scene, probe, probes
+
+
 @pytest.mark.parametrize(("harmonic_db", "tail", "patterns", "future"), [
     (35.0 + OSCILLATOR_WINDOW_DB + 0.5, 0.5, "harmonic", "integrate"),  # the oscillators reconstruct it better
     (35.0 + OSCILLATOR_WINDOW_DB + 0.5, 1.2, "harmonic", "hold"),  # ... but their paths forecast worse than freezing
@@ -155,24 +177,11 @@ def test_a_form_that_reconstructs_the_window_worse_leaves_it_to_the_time_network
 ])
 def test_a_window_the_time_network_was_chosen_for_goes_to_the_oscillators_if_they_reconstruct_it_better(
         tmp_path, monkeypatch, harmonic_db, tail, patterns, future):
-    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
-    scene = load_scene(tmp_path / "toss")
-    times = np.linspace(0.0, 0.5, 8)
     # Each probe's paths tell which probe they came from, and the backtest scores them accordingly.
-    monkeypatch.setattr(backtest_module, "probe_paths",
-                        lambda model, data, rng: (times, np.full((8, 60, 3), model.db)))
     first = {"rigid": [1.5] * 3, "harmonic": [1.3] * 3, "mlp": [0.6] * 3}
     second = {"rigid": [1.5] * 3, "harmonic": [tail] * 3, "mlp": [0.9] * 3}
-    monkeypatch.setattr(backtest_module, "backtest",
-                        lambda times, paths, *args: first if paths[0, 0, 0] == 35.0 else second)
-    monkeypatch.setattr(backtest_module, "window_psnr", lambda model, data: model.db)
-    probes = []
-
-    def probe(cfg, data, folder, progress=False, frequency=None):
-        probes.append(cfg.model.patterns)
-        return types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool),
-                                     db=35.0 if cfg.model.patterns == "mlp" else harmonic_db)
-
+    scene, probe, probes = _stubbed_probes(tmp_path, monkeypatch, first, second, 35.0,
+                                           lambda patterns: 35.0 if patterns == "mlp" else harmonic_db)
     cfg = load_config(None, [*SMALL, "train.iterations=30"])
     chosen, report = choose_form(cfg, scene, probe)
     assert probes == ["mlp", "harmonic"] and report["window_psnr"]["harmonic"] == harmonic_db
@@ -190,23 +199,10 @@ def test_a_window_the_time_network_was_chosen_for_goes_to_the_oscillators_if_the
 
 def test_a_window_a_form_lost_to_the_time_network_goes_to_the_oscillators_if_they_reconstruct_it_better(
         tmp_path, monkeypatch):
-    make_scene("toss", tmp_path / "toss", resolution=24, n_views=4, n_times=8, n_points=300, n_heldout=1)
-    scene = load_scene(tmp_path / "toss")
-    times = np.linspace(0.0, 0.5, 8)
-    monkeypatch.setattr(backtest_module, "probe_paths",
-                        lambda model, data, rng: (times, np.full((8, 60, 3), model.db)))
     first = {"rigid-drift": [0.8] * 3, "rigid": [1.5] * 3, "harmonic": [0.9] * 3, "mlp": [0.85] * 3}
     second = {"rigid-drift": [1.5] * 3, "rigid": [1.5] * 3, "harmonic": [0.2] * 3, "mlp": [0.9] * 3}
-    monkeypatch.setattr(backtest_module, "backtest",
-                        lambda times, paths, *args: first if paths[0, 0, 0] == 23.0 else second)
-    monkeypatch.setattr(backtest_module, "window_psnr", lambda model, data: model.db)
-    probes = []
     dbs = {"mlp": 23.0, "rigid": 20.0, "harmonic": 23.0 + OSCILLATOR_WINDOW_DB + 0.5}
-
-    def probe(cfg, data, folder, progress=False, frequency=None):
-        probes.append(cfg.model.patterns)
-        return types.SimpleNamespace(moving=torch.ones(60, dtype=torch.bool), db=dbs[cfg.model.patterns])
-
+    scene, probe, probes = _stubbed_probes(tmp_path, monkeypatch, first, second, 23.0, dbs.__getitem__)
     cfg = load_config(None, [*SMALL, "train.iterations=30"])
     chosen, report = choose_form(cfg, scene, probe)
     # rigid-drift forecast the first paths best but reconstructed the window worse than the time

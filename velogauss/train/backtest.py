@@ -30,8 +30,8 @@ the video alone, never from a scene's name or declared effects:
    OSCILLATOR_WINDOW_DB above the time network's probe, the oscillators train the window and the
    backtest runs again on their probe's paths, whose scores decide the future. When no
    candidate beat freezing, `model.future = "auto"` becomes "hold": past the window the run
-   shows the persistence forecast, which the backtest found best. config.toml records both, and the run folder's `motion_form.json` holds every
-   candidate's scores.
+   shows the persistence forecast, which the backtest found best. config.toml records both,
+   and the run folder's `motion_form.json` holds every candidate's scores.
 
 The choice is a forecast's, so it is made only where the window leaves a frame to forecast
 (`leaves_a_future`). A window that reaches t = 1 (D-NeRF's standard protocol, every frame
