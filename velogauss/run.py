@@ -20,10 +20,12 @@ import shutil
 from pathlib import Path
 
 from velogauss.config import load_config
+from velogauss.provenance import PROVENANCE_FILE
 
 BACKGROUNDS = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0)}
-# A folder with any of these is a run (velogauss.train.loop writes them).
-RUN_FILES = ("config.toml", "log.jsonl", "checkpoints")
+# A folder with any of these is a run (velogauss.train.loop writes them), and a new run or a
+# failed one removes them all, so that no report of an earlier run stays beside it.
+RUN_FILES = ("config.toml", "log.jsonl", "checkpoints", "motion_form.json", "forecast.json", PROVENANCE_FILE)
 # What `train --overwrite` removes: the run and what eval, render and export wrote into it;
 # data/ stays, since it may be the very scene being trained on.
 RUN_OUTPUTS = RUN_FILES + ("metrics.json", "metrics.md", "renders", "export", "sequence")

@@ -69,6 +69,14 @@ def study(tmp_path):
     write_json(tmp_path / "random-7-full-s0" / "motion_form.json",
                {"choice": "harmonic", "patterns": "mlp", "future": "fit", "scores": {}})
     write_json(tmp_path / "random-7-full-s0" / "forecast.json", {"choice": "rigid", "future": "fit", "scores": {}})
+    # Seed 1 predates provenance.json; seed 3 trained at one commit; seed 7 was resumed, twice, from
+    # a changed checkout of another commit.
+    write_json(tmp_path / "random-3-full-s0" / "provenance.json",
+               [{"iteration": 0, "version": "0.1.0", "commit": "a" * 40, "dirty": False}])
+    write_json(tmp_path / "random-7-full-s0" / "provenance.json",
+               [{"iteration": 0, "version": "0.1.0", "commit": "b" * 40, "dirty": False},
+                {"iteration": 500, "version": "0.1.0", "commit": "c" * 40, "dirty": True},
+                {"iteration": 900, "version": "0.1.0", "commit": "c" * 40, "dirty": True}])
     return tmp_path
 
 
@@ -87,11 +95,12 @@ def test_table_rows_spreads_and_targets(study):
                                      ["3", "flight, still", "ring", "64", "20"],
                                      ["7", "flight", "monocular", "128", "40"]]
     assert rows[0][5:] == ["0.020", "0.300", "0.010", "0.200", "0.500", "0.600",
-                           "31.00", "22.00", "23.00", "-1.00", "20.00", "+2.00", "—"]
+                           "31.00", "22.00", "23.00", "-1.00", "20.00", "+2.00", "—", "—"]
     assert rows[1][5:] == ["0.040", "0.080", "0.030", "0.050", "0.200", "0.300",
-                           "30.00", "25.00", "18.00", "+7.00", "21.00", "+4.00", "rigid-gravity"]
+                           "30.00", "25.00", "18.00", "+7.00", "21.00", "+4.00", "rigid-gravity",
+                           "aaaaaaa"]
     assert rows[2][5:] == ["0.100", "0.120", "—", "—", "—", "—", "33.00", "28.00", "20.00", "+8.00", "—", "—",
-                           "mlp, forecast rigid"]
+                           "mlp, forecast rigid", "bbbbbbb, ccccccc+"]
     # Linear percentiles of n sorted values: position q/100 (n - 1). Of 3 values the 90th lies at 1.8
     # (0.8 of the way from the 2nd to the 3rd), the 10th at 0.2; of 2 values at 0.9 and 0.1.
     spreads = {(r[0], r[1]): r[2:] for r in section_rows(text, "Distribution")}

@@ -127,12 +127,16 @@ def test_readme_continue_line_without_resume_is_refused(run):
 
 def test_overwrite_replaces_the_run(scene, run):
     (run / "metrics.json").write_text("{}")
+    # An earlier run's backtest and forecast reports, which this run (its form set) does not write.
+    (run / "motion_form.json").write_text('{"choice": "harmonic"}')
+    (run / "forecast.json").write_text('{"choice": "rigid"}')
     old = checkpoint_path(run).read_bytes()
     result = train(scene, run, "--overwrite", "--set", "train.seed=1")
     assert result.exit_code == 0, result.output
     assert checkpoint_path(run).read_bytes() != old
     assert "seed = 1" in (run / "config.toml").read_text()
-    assert not (run / "metrics.json").exists()  # the old run's metrics do not describe the new one
+    # Neither the old run's metrics nor its reports describe the new one.
+    assert not any((run / name).exists() for name in ("metrics.json", "motion_form.json", "forecast.json"))
 
 
 # --- 3. resume with a changed config ------------------------------------------------------

@@ -195,7 +195,8 @@ def test_report_mean_and_spread_over_seeds(tmp_path):
     sweep = load_grid(_grid(tmp_path, "[[grid]]\nscenes = ['toss']\nseeds = [0, 1, 2]\n"
                                       "[[grid]]\nscenes = ['spin']"))
     psnr = {0: 20.0, 1: 21.0, 2: 25.0}
-    outcomes = {p.name: {"status": "ok", "metrics": {"interp_psnr": psnr[p.seed], "train_min": 1.0}}
+    outcomes = {p.name: {"status": "ok", "metrics": {"interp_psnr": psnr[p.seed], "train_min": 1.0,
+                                                     "code": "abcdef0"}}
                 for p in sweep.points[:3]}
     outcomes[sweep.points[3].name] = {"status": "failed", "error": "DataError: broken | file"}
     written = write_report(tmp_path, sweep.points, outcomes)
@@ -206,6 +207,7 @@ def test_report_mean_and_spread_over_seeds(tmp_path):
     rows = list(csv.DictReader((tmp_path / "results.csv").open()))
     assert [r["status"] for r in rows] == ["ok", "ok", "ok", "failed"]
     assert float(rows[2]["interp_psnr"]) == 25.0 and rows[3]["interp_psnr"] == ""
+    assert [r["code"] for r in rows] == ["abcdef0"] * 3 + [""]
     assert {p.name for p in written if p.parent.name == "plots"} == {"interp_psnr.png", "train_min.png"}
     assert len(METRICS) == len(set(m for m, _, _ in METRICS))
 
@@ -251,6 +253,9 @@ scenes = ["spin"]
         # A torch process's own peak resident memory: above the interpreter's, far below the machine's.
         assert 0.1 < float(rows[name]["train_peak_gb"]) < 8
         assert load_config(tmp_path / "out" / name / "config.toml").train.iterations == 12
+        if (ROOT / ".git").exists():  # the checkout these tests run from trained it
+            head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
+            assert rows[name]["code"].rstrip("+") == head.stdout.strip()[:7]
     assert (tmp_path / "out" / "plots" / "extrap_psnr.png").stat().st_size > 0
     assert "| toss-no-adf | 1 |" in (tmp_path / "out" / "results.md").read_text()
 

@@ -2,6 +2,7 @@
 detection, atomic checkpoints, exact resume and Ctrl-C."""
 
 import dataclasses
+import importlib.metadata
 import json
 import signal
 import threading
@@ -310,7 +311,8 @@ def test_static_particles_are_rendered_canonical(tiny_scene):
 
 def test_auto_schedule_is_recorded_and_kept_on_resume(tiny_scene, tmp_path):
     """config.toml holds the numbers a run's "auto" schedule resolved to, and a resume that
-    trains longer keeps them rather than stretching the schedule mid-run."""
+    trains longer keeps them rather than stretching the schedule mid-run; provenance.json holds
+    both sessions."""
     auto = [item for item in TINY if item.split("=")[0] not in SCHEDULE]
     loop.train(load_config(None, auto + ["train.iterations=6"]), tiny_scene, tmp_path, progress=False)
     first = load_config(tmp_path / "config.toml")
@@ -319,6 +321,9 @@ def test_auto_schedule_is_recorded_and_kept_on_resume(tiny_scene, tmp_path):
     resumed = load_config(tmp_path / "config.toml")
     assert resumed.train.iterations == 9
     assert dataclasses.replace(resumed, train=dataclasses.replace(resumed.train, iterations=6)) == first
+    sessions = json.loads((tmp_path / "provenance.json").read_text())
+    assert [s["iteration"] for s in sessions] == [0, 6]
+    assert all(s["version"] == importlib.metadata.version("velogauss") for s in sessions)
 
 
 def test_a_run_of_the_default_form_resumes_with_the_form_it_chose(tiny_scene, tmp_path):

@@ -19,7 +19,10 @@ metrics.json (`velogauss.evaluate.evaluate_model`'s result) into one row per sce
   network alone;
 - the run folder's `motion_form.json` `choice` (`model.patterns = "auto"`), when written, marked
   "(held)" when its `future` is "hold", "(coast)" when "coast"; when "fit", the form that trained
-  the window and the forecast that `forecast.json` says was fitted after it (`form_label`).
+  the window and the forecast that `forecast.json` says was fitted after it (`form_label`);
+- the code that trained the full run (`velogauss.provenance.code_label`: its commit), "—" for a
+  run trained before run folders recorded it, so a table that merges runs of several versions
+  says which row is which.
 
 `velogauss bench family translation-only --seeds S` scores each scene's own translation-only
 velocity error from its drawn parameters (`translation_only`): the floor that the velocity
@@ -41,6 +44,7 @@ from tqdm.auto import tqdm
 
 from velogauss.bench.harness import markdown_cell
 from velogauss.io_utils import write_text
+from velogauss.provenance import code_label
 from velogauss.scenes.family import (KINDS, REPORT_SEEDS, TUNING_SEEDS, draw_parameters, make_random_scene,
                                      scene_from_parameters)
 from velogauss_core.motion import Ablation
@@ -249,7 +253,7 @@ def scene_row(scene, full_run, deform_run):
             "interp": _at(metrics, "splits", "interpolation", "mean", "psnr"), "extrap": extrap, "frozen": frozen,
             "gain_frozen": _difference(extrap, frozen), "deform_extrap": deform_extrap,
             "gain_deform": _difference(extrap, deform_extrap),
-            "form": form}
+            "form": form, "code": code_label(full_run)}
 
 
 def _at(tree, *keys):
@@ -304,13 +308,14 @@ def _status(met):
 
 def markdown(out, rows, missing):
     """The study's Markdown: the scenes, the distributions, the targets, the missing runs."""
-    headers = ["seed", "kinds", "rig", "px", "frames", *(h for _, h, _ in COLUMNS), "motion form"]
+    headers = ["seed", "kinds", "rig", "px", "frames", *(h for _, h, _ in COLUMNS), "motion form", "code"]
     lines = [f"# Scene family study: {out}", "",
              f"{len(rows)} scene(s) with a finished full run; {len(missing)} run(s) missing (listed at the end).",
-             "", "## Scenes", "", _row(headers), "|---:|---|---|" + "---:|" * (2 + len(COLUMNS)) + "---|"]
+             "", "## Scenes", "", _row(headers), "|---:|---|---|" + "---:|" * (2 + len(COLUMNS)) + "---|---|"]
     for r in rows:
         lines.append(_row([r["seed"], ", ".join(r["kinds"]), r["rig"], r["px"], r["frames"],
-                           *(markdown_cell(r[k], fmt) for k, _, fmt in COLUMNS), r["form"] or "—"]))
+                           *(markdown_cell(r[k], fmt) for k, _, fmt in COLUMNS), r["form"] or "—",
+                           r["code"] or "—"]))
     lines += ["", "## Distribution", "",
               f"Percentiles by numpy.percentile, method=\"{PERCENTILE_METHOD}\" (linear interpolation between "
               "the order statistics). p90: the value 90 % of the scenes do at least as well as (the 90th "

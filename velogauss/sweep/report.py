@@ -1,10 +1,12 @@
 """The results of a sweep: `results.csv`, `results.md` and one plot per metric.
 
 `run_metrics(run_dir)` reads what `velogauss train`/`eval` left in a run folder
-(`metrics.json`, `log.jsonl`) into the flat columns of `METRICS`; `write_report` writes
+(`metrics.json`, `log.jsonl`, `provenance.json`) into the flat columns of `METRICS` and the
+code that trained it; `write_report` writes
 
 - `results.csv`: one row per point (name, scene, ablation, seed, each `set` key, status,
-  error, then the metrics), failures included with their error;
+  error, the code that trained it (`velogauss.provenance.code_label`), then the metrics),
+  failures included with their error;
 - `results.md`: the merged table of every finished run, then the table of mean ± spread
   over seeds (spread: the sample standard deviation, n − 1 in the denominator; a group
   with one seed shows its value alone), with the number of seeds per group;
@@ -21,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from velogauss.io_utils import save_figure, write_text
+from velogauss.provenance import code_label
 
 # (column, header of the Markdown table, decimals). Missing values (no ground-truth motion,
 # e.g. a DefGS-style run without velocity) are empty in the CSV and "—" in the tables.
@@ -34,7 +37,8 @@ METRICS = (
 
 
 def run_metrics(run_dir):
-    """`{column: value or None}` for `METRICS` from `run_dir`'s metrics.json and log.jsonl."""
+    """`{column: value or None}` for `METRICS` from `run_dir`'s metrics.json and log.jsonl, and
+    "code": the code that trained it (None for a run from before provenance.json)."""
     run_dir = Path(run_dir)
     metrics = json.loads((run_dir / "metrics.json").read_text())
     log = [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines() if line.strip()]
@@ -54,6 +58,7 @@ def run_metrics(run_dir):
         "gaussians": last.get("n_gaussians"),
         "train_min": None if "elapsed_s" not in last else last["elapsed_s"] / 60.0,
         "train_peak_gb": None if last.get("peak_rss_mib") is None else last["peak_rss_mib"] / 1024,
+        "code": code_label(run_dir),
     }
 
 
@@ -73,7 +78,7 @@ def write_report(out_dir, points, outcomes):
                      "seed": p.seed, **{k: settings.get(k, "") for k in set_keys}, "status": outcome["status"],
                      "error": outcome.get("error", ""), **(outcome.get("metrics") or {})})
     written = [out_dir / "results.csv", out_dir / "results.md"]
-    write_text(written[0], _csv(rows, ["run", "scene", "ablation", "seed", *set_keys, "status", "error",
+    write_text(written[0], _csv(rows, ["run", "scene", "ablation", "seed", *set_keys, "status", "error", "code",
                                        *[m for m, _, _ in METRICS]]))
     finished = [r for r in rows if r["status"] in ("ok", "skipped")]
     groups = {}

@@ -40,6 +40,7 @@ from velogauss.io_utils import write_text
 from velogauss.memory import peak_rss_mib
 from velogauss.model import build_model, model_from_state, scene_spec
 from velogauss.model.velogauss_model import moving_state_at, render_gaussians
+from velogauss.provenance import record_session
 from velogauss.threads import apply_threads
 from velogauss.train.checkpoint import (checkpoint_path, forecast_spec, load_checkpoint, remove_stale_temporaries,
                                        save_checkpoint)
@@ -103,7 +104,8 @@ def warn_short_schedule(train_cfg):
 def prepare(cfg, data, run_dir, resume=False, progress=False, frequency=None):
     """The training state of `train` before its first iteration: (Trainer, first iteration).
 
-    Writes config.toml and an empty log.jsonl into `run_dir` for a new run; `trainer.step(it)`
+    Writes config.toml and an empty log.jsonl into `run_dir` for a new run, and the session into
+    its provenance.json (velogauss.provenance) for a new run or a resumed one; `trainer.step(it)`
     and `trainer.adapt_gaussians(it + 1)` then run iteration `it` (the contention benchmark
     times them).
     The "auto" keys of the run's length, its schedule and the transport weight are resolved here
@@ -171,6 +173,7 @@ def prepare(cfg, data, run_dir, resume=False, progress=False, frequency=None):
             write_text(run_dir / "motion_form.json", json.dumps(report, indent=1))
         write_text(run_dir / "config.toml", to_toml(cfg))
         write_text(run_dir / "log.jsonl", "")
+    record_session(run_dir, start)
     optimizer = make_optimizer(model, cfg.train, extent)
     stats = DensityStats(len(model.gaussians), device=device)
     if resume:
