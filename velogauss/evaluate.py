@@ -364,9 +364,9 @@ def metrics_markdown(result, title="Metrics"):
     """The whole `metrics.md`: headline tables (`summary_markdown`), how the numbers are
     defined, and a per-frame table of each split."""
     parts = [f"# {title}", ""]
-    for key in ("run", "data", "split", "lpips"):
+    for key in ("run", "trained_by", "data", "split", "lpips"):
         if result.get(key):
-            parts.append(f"- {key}: `{result[key]}`")
+            parts.append(f"- {key.replace('_', ' ')}: `{result[key]}`")
     parts += ["", summary_markdown(result), "## Definitions", "", _DEFINITIONS.strip(), ""]
     for name, split in result["splits"].items():
         parts += [f"## Per frame: {name}", "", "| frame | t | PSNR | SSIM | LPIPS (alex) | LPIPS (vgg) |",

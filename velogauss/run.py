@@ -195,11 +195,13 @@ def load_run_scene(cfg, data_dir):
 
 
 def run_evaluation(run_dir, model, scene, splits, lpips_weights):
-    """Evaluate, write `run_dir/metrics.json` and `run_dir/metrics.md` atomically; return the result."""
+    """Evaluate, write `run_dir/metrics.json` and `run_dir/metrics.md` atomically; return the result,
+    which names the code that trained the run (`velogauss.provenance.code_label`) beside it."""
     from velogauss.evaluate import evaluate_model, metrics_markdown
     from velogauss.io_utils import write_json, write_text
+    from velogauss.provenance import code_label
 
-    result = {"run": str(run_dir), "data": str(scene.root),
+    result = {"run": str(run_dir), "trained_by": code_label(run_dir), "data": str(scene.root),
               **evaluate_model(model, scene, splits, lpips_weights, _ground_truth(scene), progress=True)}
     write_json(Path(run_dir) / "metrics.json", result)
     write_text(Path(run_dir) / "metrics.md", metrics_markdown(result, title=f"Metrics of {Path(run_dir).name}"))

@@ -144,6 +144,11 @@ def test_cli_train_eval_render_export(tmp_path):
         assert np.isfinite(metrics["splits"][split]["mean"]["psnr"])
     assert metrics["motion"]["velocity"]["points"] > 0
     assert (run / "metrics.md").read_text().startswith("#")
+    # Scored beside the code that trained it, as the run folder recorded it.
+    (trained,) = json.loads((run / "provenance.json").read_text())
+    code = (trained["commit"] or "")[:7] or trained["version"]
+    assert metrics["trained_by"] in (code, code + "+") and f"- trained by: `{metrics['trained_by']}`" in \
+        (run / "metrics.md").read_text()
 
     result = runner.invoke(app, ["render", str(run), "--out", str(tmp_path / "renders")])
     assert result.exit_code == 0, result.output
