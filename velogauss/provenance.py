@@ -63,13 +63,12 @@ def read_provenance(run_dir):
 
 def record_session(run_dir, iteration, root=SOURCE_ROOT):
     """Append this session (training from `iteration`) to `run_dir`'s provenance.json, atomically;
-    a new run (`iteration` 0) starts the list afresh. Returns the entry."""
+    a new run (`iteration` 0) starts the list afresh."""
     entry = {"iteration": int(iteration),
              "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
              **code_version(root)}
     sessions = read_provenance(run_dir) if iteration > 0 else []
     write_text(Path(run_dir) / PROVENANCE_FILE, json.dumps(sessions + [entry], indent=1))
-    return entry
 
 
 def code_label(run_dir):
