@@ -202,7 +202,7 @@ def run_evaluation(run_dir, model, scene, splits, lpips_weights):
     from velogauss.provenance import code_label
 
     result = {"run": str(run_dir), "trained_by": code_label(run_dir), "data": str(scene.root),
-              **evaluate_model(model, scene, splits, lpips_weights, _ground_truth(scene), progress=True)}
+              **evaluate_model(model, scene, splits, lpips_weights, ground_truth(scene), progress=True)}
     write_json(Path(run_dir) / "metrics.json", result)
     write_text(Path(run_dir) / "metrics.md", metrics_markdown(result, title=f"Metrics of {Path(run_dir).name}"))
     return result
@@ -212,7 +212,7 @@ def run_render(out_dir, model, scene, fps=8.0, label=True):
     """Write the pictures of `velogauss.visualize.render_run`; return their paths."""
     from velogauss.visualize import render_run
 
-    return render_run(model, scene, out_dir, fps=fps, ground_truth=_ground_truth(scene), label=label, progress=True)
+    return render_run(model, scene, out_dir, fps=fps, ground_truth=ground_truth(scene), label=label, progress=True)
 
 
 def motion_form_line(run_dir):
@@ -260,7 +260,7 @@ def headline(result, run_dir):
     return f"\n{summary_markdown(result)}\nmetrics: {Path(run_dir) / 'metrics.md'} and metrics.json"
 
 
-def _ground_truth(scene):
+def ground_truth(scene):
     """The analytic scene of a generated scene folder, None for recorded data."""
     from velogauss.scenes import load_ground_truth
 

@@ -16,7 +16,7 @@ from tests.app.cli_checks import assert_refused
 runner = CliRunner()
 COMMANDS = ["make-scene", "train", "eval", "render", "export", "view", "sweep", "walkthrough", "bench", "diagnose"]
 BENCHMARKS = ["raster", "motion", "accuracy", "effects", "export", "viewer", "load", "step_profile", "gpu_step",
-              "step_ratio", "fidelity"]
+              "step_ratio", "fidelity", "futures"]
 DIAGNOSTICS = ["centre", "visibility"]
 
 

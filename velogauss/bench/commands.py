@@ -353,3 +353,17 @@ def family_table_command(
 
     with user_errors():
         typer.echo(family.table(out, write), nl=False)
+
+
+@bench_app.command("futures")
+def futures_command(
+    runs: List[Path] = typer.Argument(..., help="Trained run folders whose scene has frames past the window."),
+    write: Optional[Path] = typer.Option(None, "--write", help="Also write the Markdown here, the records as JSON "
+                                                               "beside it."),
+):
+    """Each run's extrapolation under every future (hold, coast, integrate, fit) without retraining, and each
+    policy's spread over the runs against the freeze baseline (velogauss.bench.futures; Markdown)."""
+    from velogauss.bench import futures
+
+    with user_errors():
+        typer.echo(futures.run(runs, write), nl=False)
