@@ -85,7 +85,7 @@ def markdown(records):
     table = gains(records)
     lines = ["## Each run under each future: extrapolation PSNR − freeze baseline (dB)", "",
              "| run | trained | fit refitted | frozen dB | " + " | ".join(FUTURES) + " | best |",
-             "|---|---|---|---:|" + "---:|" * (len(FUTURES) + 1)]
+             "|---|---|---|---:|" + "---:|" * len(FUTURES) + "---|"]
     for i, r in enumerate(records):
         best = max(FUTURES, key=lambda f: r["futures"][f]["psnr"])
         lines.append(f"| {Path(r['run']).name} | {r['trained']} | {r['fit_choice']} | {r['frozen']:.2f} | "
