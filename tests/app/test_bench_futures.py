@@ -76,6 +76,12 @@ def test_the_command_writes_the_table_and_the_records(fitted_run, tmp_path):
     assert [r["run"] for r in json.loads(out.with_suffix(".json").read_text())["runs"]] == [str(fitted_run)]
 
 
+def test_a_json_write_path_is_refused_before_any_run_is_scored(tmp_path):
+    result = CliRunner().invoke(app, ["bench", "futures", str(tmp_path / "nowhere"), "--write", str(tmp_path / "f.json")])
+    assert result.exit_code != 0 and "--write" in result.output and "f.json" in result.output
+    assert not (tmp_path / "f.json").exists()
+
+
 def test_a_missing_run_folder_is_one_line_naming_it(tmp_path):
     result = CliRunner().invoke(app, ["bench", "futures", str(tmp_path / "nowhere")])
     assert result.exit_code != 0

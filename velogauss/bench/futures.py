@@ -106,6 +106,8 @@ def run(run_dirs, write=None):
     write it there and the records as JSON beside it (same stem), atomically."""
     if not run_dirs:
         raise ValueError("runs: expected at least one run folder")
+    if write is not None and Path(write).suffix == ".json":
+        raise ValueError(f"--write: the Markdown file, whose records go beside it as .json; got {write}")
     records = [score_run(r) for r in tqdm(run_dirs, desc="runs")]
     text = markdown(records)
     if write is not None:
