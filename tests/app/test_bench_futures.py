@@ -86,4 +86,3 @@ def test_a_missing_run_folder_is_one_line_naming_it(tmp_path):
     result = CliRunner().invoke(app, ["bench", "futures", str(tmp_path / "nowhere")])
     assert result.exit_code != 0
     assert "nowhere" in result.output and "Traceback" not in result.output
-

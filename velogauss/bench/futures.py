@@ -19,6 +19,7 @@ worst; `velogauss.bench.family.spread`) and the count of runs below the baseline
   velogauss bench futures RUN [RUN ...] --write futures.md    (futures.json beside it)
 """
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -42,8 +43,6 @@ def score_run(run_dir):
     `fit_choice`), `frozen` (the freeze baseline's PSNR), and per future of `FUTURES` its
     `psnr` and `vel_future` (None without ground truth or velocity). FileNotFoundError naming a
     missing run folder or checkpoint (the scene's loader refuses one with nothing past its window)."""
-    import dataclasses
-
     from velogauss.evaluate import evaluate_split, freeze_baseline, velocity_error
     from velogauss.run import ground_truth, load_run_model, load_run_scene, recorded_data_dir
     from velogauss.train.forecast import fit_forecast
