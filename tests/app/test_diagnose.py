@@ -49,3 +49,24 @@ def test_the_visibility_command_reads_a_trained_run(trained_toss):
     rows = [[cell.strip() for cell in line.strip("|").split("|")] for line in lines[2:]]
     assert rows and all(row[0] == str(run) and row[2] in ("seen", "unseen") and int(row[3]) > 0 for row in rows)
     assert {row[1] for row in rows} == {"box", "all"}
+
+
+def test_the_slip_command_reads_a_trained_run(trained_toss):
+    """`velogauss diagnose slip RUN --data SCENE --times 0.5,1`: a markdown table with a row per
+    moving body and time; the box turns 2 rad per unit time, so by t = 1 by 114.6 degrees."""
+    run, scene = trained_toss
+    result = CliRunner().invoke(app, ["diagnose", "slip", str(run), "--data", str(scene), "--times", "0.5,1"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[0].startswith("| run | body | t | Gaussians | body's turn")
+    rows = [[cell.strip() for cell in line.strip("|").split("|")] for line in lines[2:]]
+    assert [(row[0], row[1], row[2]) for row in rows] == [(str(run), "box", "0.5"), (str(run), "box", "1")]
+    assert all(int(row[3]) >= 3 for row in rows)
+    assert float(rows[1][4]) == pytest.approx(114.6, abs=0.1)
+
+
+def test_the_slip_command_names_a_bad_time(trained_toss):
+    run, scene = trained_toss
+    result = CliRunner().invoke(app, ["diagnose", "slip", str(run), "--data", str(scene), "--times", "0.5,soon"])
+    assert result.exit_code == 2
+    assert "--times" in result.output and "soon" in result.output

@@ -2,7 +2,7 @@
 ground truth (benchmarks/FIDELITY.md uses them). They time nothing, so they are not benchmarks.
 
 `centre`: the learned velocity, spin and acceleration at each moving body's centre against the
-truth; `visibility`: the velocity error split by whether a training camera sees the surface.
-Run them as `velogauss diagnose centre RUN...` and `velogauss diagnose visibility RUN...`
-(`commands`).
+truth; `visibility`: the velocity error split by whether a training camera sees the surface;
+`slip`: how far each body's Gaussians turn against the body and slip off their material.
+Run them as `velogauss diagnose centre|visibility|slip RUN...` (`commands`).
 """

@@ -30,10 +30,7 @@ def centre_command(
     from velogauss.diagnose.centre import report
 
     with user_errors():
-        try:
-            at = [float(t) for t in times.split(",")]
-        except ValueError:
-            raise ValueError(f"--times: expected comma-separated numbers, got {times!r}") from None
+        at = _times(times)
         for run in runs:
             for line in report(run, data, at):
                 typer.echo(line)
@@ -52,3 +49,29 @@ def visibility_command(
         for run in runs:
             for row in table_rows(run, data):
                 typer.echo(row)
+
+
+@diagnose_app.command("slip")
+def slip_command(
+    runs: List[Path] = typer.Argument(..., help=_RUNS_HELP),
+    data: Optional[Path] = typer.Option(None, "--data", help=_DATA_HELP),
+    times: str = typer.Option("0.25,0.5,0.75,1", help="Comma-separated times."),
+):
+    """Each moving body's Gaussians: their best rigid turn against the body's, how far they slip off
+    their material, and how much of that is not rigid."""
+    from velogauss.diagnose.slip import TABLE_HEADER, table_rows
+
+    with user_errors():
+        at = _times(times)
+        typer.echo(TABLE_HEADER)
+        for run in runs:
+            for row in table_rows(run, data, at):
+                typer.echo(row)
+
+
+def _times(text):
+    """The `--times` option's numbers; ValueError naming it when one is not a number."""
+    try:
+        return [float(t) for t in text.split(",")]
+    except ValueError:
+        raise ValueError(f"--times: expected comma-separated numbers, got {text!r}") from None
