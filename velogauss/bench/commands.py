@@ -306,7 +306,7 @@ def dnerf_future_command(
 family_app = typer.Typer(
     help="The scene family's study (velogauss.bench.family): `scenes` renders seeds' scenes and their sweep "
          "grid, `table` the per-scene scores, their spread by kind of motion and the targets, `translation-only` "
-         "each scene's own velocity score without spin.",
+         "each scene's own velocity score without spin, `budgets` and `pareto` accuracy against training time.",
     no_args_is_help=True,
 )
 bench_app.add_typer(family_app, name="family")
@@ -353,6 +353,33 @@ def family_table_command(
 
     with user_errors():
         typer.echo(family.table(out, write), nl=False)
+
+
+@family_app.command("budgets")
+def family_budgets_command(
+    seeds: str = typer.Option(..., help="tuning, report (velogauss.scenes.family's lists) or comma-separated seeds."),
+    fractions: str = typer.Option("0.25,0.5", help="Comma-separated shares in (0, 1) of each scene's default "
+                                                    "iterations, each trained beside the default."),
+    out: Path = _FAMILY_OUT,
+):
+    """Render each seed's scene (unless there) and write OUT/grid.toml: its default run and shorter ones."""
+    from velogauss.bench import family_budget
+
+    with user_errors():
+        family_budget.budgets(seeds, fractions, out, echo=typer.echo)
+
+
+@family_app.command("pareto")
+def family_pareto_command(
+    out: Path = _FAMILY_OUT,
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write the accuracy-against-time plot here (PNG)."),
+    write: Optional[Path] = typer.Option(None, "--write", help="Also write the Markdown to this file."),
+):
+    """Per budget over the scenes: cost against the default run and the family's scores (Markdown)."""
+    from velogauss.bench import family_budget
+
+    with user_errors():
+        typer.echo(family_budget.pareto(out, plot, write), nl=False)
 
 
 @bench_app.command("futures")
