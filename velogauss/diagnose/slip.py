@@ -1,7 +1,7 @@
 """How far each moving body's Gaussians slip from the material they started on, and how far
 their best rigid motion turns against the body's.
 
-A diagnostic of the error budget (benchmarks/FIDELITY.md, "Gaussians that roll"): the Gaussians
+A diagnostic of the error budget (benchmarks/FIDELITY.md, section 0z): the Gaussians
 of a body are those the trajectory metric tracks (`velogauss.evaluate.trajectory_error`: opacity
 at least `ALPHA_MIN`, within `EVAL_SURFACE_MARGIN` of the body at t = 0), each followed along
 its physics trajectory (`tracked_positions`). At each time t it gives
