@@ -18,7 +18,7 @@ median and the 10th–90th percentile range of
   frame (dB), the family's targets (velogauss.bench.family).
 
 The plot draws each metric against the median cost ratio and joins the budgets on the Pareto
-front (velogauss.bench.fidelity.pareto_front). Times are whatever the runs took where they ran:
+front (velogauss.bench.fidelity.pareto_panel). Times are whatever the runs took where they ran:
 compare budgets trained side by side in one sweep, one thread each.
 """
 
@@ -31,7 +31,7 @@ import numpy as np
 import tomli_w
 
 from velogauss.bench.family import RUN_SEED, make_scenes, parse_seeds
-from velogauss.bench.fidelity import pareto_front
+from velogauss.bench.fidelity import pareto_panel
 from velogauss.io_utils import atomic_path, write_text
 
 # The budget's key in a run's name (velogauss/sweep/grid.py names a point by its settings).
@@ -167,15 +167,8 @@ def pareto_plot(points, path):
         ys = [stats[key][0] for _, _, stats in points]
         low = [y - stats[key][1] for y, (_, _, stats) in zip(ys, points)]
         high = [stats[key][2] - y for y, (_, _, stats) in zip(ys, points)]
-        ax.errorbar(xs, ys, yerr=[low, high], fmt="o", capsize=3)
-        for x, y, (fraction, n, _) in zip(xs, ys, points):
-            ax.annotate(f"{fraction:g}× ({n})", (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        front = pareto_front(xs, ys, sign)
-        if front:
-            ax.plot(*zip(*front), "-", alpha=0.5)
-        ax.set_xlabel("training cost (× the default run's)")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
+        pareto_panel(ax, xs, ys, [low, high], [f"{fraction:g}× ({n})" for fraction, n, _ in points], sign,
+                     "training cost (× the default run's)", label)
     fig.suptitle("scene family, defaults: accuracy against training time (median, 10th–90th pct)")
     fig.tight_layout()
     with atomic_path(path) as tmp:

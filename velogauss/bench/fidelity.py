@@ -275,6 +275,21 @@ def pareto_front(costs, scores, sign):
     return front
 
 
+def pareto_panel(ax, xs, ys, spread, labels, sign, xlabel, ylabel):
+    """Draw one accuracy-against-cost panel on `ax`: the points (xs, ys) with error bars `spread`
+    ([below], [above]), each annotated with its label, and the Pareto front joined (`sign`: +1
+    where higher is better, -1 where lower is)."""
+    ax.errorbar(xs, ys, yerr=spread, fmt="o", capsize=3)
+    for x, y, label in zip(xs, ys, labels):
+        ax.annotate(label, (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    front = pareto_front(xs, ys, sign)
+    if front:
+        ax.plot(*zip(*front), "-", alpha=0.5)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+
+
 def pareto_plot(records, path, scene="toss"):
     """Write `path` (PNG): extrapolation PSNR and future velocity error against training wall
     time on `scene`, one point per cost variant (mean over its seeds, bars: min-max), the runs
@@ -301,15 +316,8 @@ def pareto_plot(records, path, scene="toss"):
         xs = [np.mean(p[2]["wall_s"]) for p in points]
         ys = [np.mean(p[2][key]) for p in points]
         spread = [[y - min(p[2][key]) for y, p in zip(ys, points)], [max(p[2][key]) - y for y, p in zip(ys, points)]]
-        ax.errorbar(xs, ys, yerr=spread, fmt="o", capsize=3)
-        for x, y, p in zip(xs, ys, points):
-            ax.annotate(p[0].removeprefix("cost-"), (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        front = pareto_front(xs, ys, sign)
-        if front:
-            ax.plot(*zip(*front), "-", alpha=0.5)
-        ax.set_xlabel("training wall time (s, one thread)")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
+        pareto_panel(ax, xs, ys, spread, [p[0].removeprefix("cost-") for p in points], sign,
+                     "training wall time (s, one thread)", label)
     fig.suptitle(f"{scene}, full pipeline: accuracy against training time")
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
