@@ -288,7 +288,9 @@ def init_motion_params(rng, cfg):
               acceleration, centre and centre velocity at t = 0 (VG-ACC-RIGID), or with
               "harmonic" Q (2 ACC_HARMONICS + 1, K, 12), the coefficients of 1, cos(j Omega t)
               and sin(j Omega t) at the patterns' frequency (VG-ACC-HARM);
-      "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10.
+      "adf":  3 (1 + 2 n_freqs_adf_x) + (1 + 2 n_freqs_adf_t) + code_dim -> hidden^depth -> 10;
+      "centre": (K, 3), the point each pattern is written about (VG-COEF-CENTRE): the world's
+              origin here; training places them on the data (velogauss.train.mixing).
     Hidden layers use PyTorch's default Linear initialisation (uniform within
     +-1/sqrt(fan_in)). Three heads start at zero, so a fresh model is the still canonical
     scene: the time network's last layer (no velocity; B = 0 under "rigid"), Q (no
@@ -311,6 +313,7 @@ def init_motion_params(rng, cfg):
         "time": _patterns_init(cfg, mlp),
         "acc": _acceleration_init(rng, cfg),
         "adf": mlp("adf", zero_last=True),
+        "centre": np.zeros((K, 3)),
     }
 
 

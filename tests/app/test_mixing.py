@@ -10,7 +10,7 @@ from velogauss.model.motion import MotionParameters
 from velogauss.model.spec import resolve_motion_spec
 from velogauss.scenes import make_scene
 from velogauss.train import loop
-from velogauss.train.mixing import cluster_targets, resolve_mixing_init, separate_patterns
+from velogauss.train.mixing import cluster_targets, place_patterns, resolve_mixing_init, separate_patterns
 from velogauss_core.constants import MIXING_INIT_WEIGHT
 from velogauss_fast.motion.code import physics_code
 from velogauss_fast.motion.coefficients import mixing_weights
@@ -78,6 +78,58 @@ def test_training_starts_from_the_clusters(tmp_path):
         spreads[start] = float(m.max(1).values.mean())
         trainer.step(0)  # and it trains from there
     assert spreads["uniform"] < 0.4 < MIXING_INIT_WEIGHT - 0.05 < spreads["clusters"]
+
+
+@pytest.mark.spec("VG-COEF-CENTRE")
+@pytest.mark.parametrize("mixing", ["uniform", "clusters"])
+def test_each_pattern_is_centred_on_its_region(mixing):
+    spec = resolve_motion_spec(ModelConfig(n_patterns=4, code_dim=4, hidden=16, depth=1, n_freqs_x=1, **RIGID),
+                               None, 0.75)
+    motion = MotionParameters(spec, np.random.default_rng(0))
+    assert float(motion.centre.abs().max()) == 0.0  # the world's origin until placed
+    points, blob = _blobs()
+    x = torch.tensor(points, dtype=torch.float32)
+    place_patterns(motion, x, np.random.default_rng(1), mixing, "clusters")
+    # The centres are the blobs' middles, one each (the blobs' own means, not k-means' output).
+    means = np.stack([points[blob == b].mean(0) for b in range(4)])
+    centres = motion.centre.numpy()
+    nearest = np.linalg.norm(centres[:, None] - means[None], axis=-1).argmin(1)
+    assert sorted(nearest) == [0, 1, 2, 3]
+    np.testing.assert_allclose(centres, means[nearest], atol=1e-5)
+    if mixing == "clusters":
+        # Each blob's dominant pattern is the one centred on that blob.
+        dominant = _weights(motion, x).argmax(1).numpy()
+        assert all(nearest[dominant[blob == b]].tolist() == [b] * 50 for b in range(4))
+    else:
+        assert float(_weights(motion, x).detach().max(1).values.mean()) < 0.5  # the mixing left uniform
+    # "origin" leaves the centres at the world's origin.
+    fresh = MotionParameters(spec, np.random.default_rng(0))
+    place_patterns(fresh, x, np.random.default_rng(1), mixing, "origin")
+    assert float(fresh.centre.abs().max()) == 0.0
+
+
+def test_training_places_the_centres_and_a_checkpoint_keeps_them(tmp_path):
+    make_scene("multi", tmp_path / "multi", resolution=24, n_views=4, n_times=6, n_points=400, n_heldout=1)
+    data = load_scene(tmp_path / "multi")
+    tiny = ["train.iterations=4", "train.warmup=2", "train.curriculum=1", "model.hidden=16", "model.depth=1",
+            "model.n_patterns=8", "physics.n_points=32", "model.patterns=mlp"]
+    trainer, _ = loop.prepare(load_config(None, tiny), data, tmp_path / "run")
+    centres = trainer.model.motion.centre.clone()
+    means = trainer.model.gaussians.means.detach()
+    # Every centre is the mean of the initial points nearest to it (a k-means fixed point), inside their bounds.
+    owner = torch.cdist(means, centres).argmin(1)
+    for k in owner.unique():
+        torch.testing.assert_close(centres[k], means[owner == k].mean(0), rtol=0, atol=1e-4)
+    assert len(owner.unique()) > 1
+    state = trainer.model.state_dict()
+    assert torch.equal(state["motion.centre"], centres)
+    trainer, _ = loop.prepare(load_config(None, [*tiny, "model.pattern_centres=origin"]), data, tmp_path / "origin")
+    assert float(trainer.model.motion.centre.abs().max()) == 0.0
+
+
+def test_a_bad_pattern_centres_names_the_key():
+    with pytest.raises(ValueError, match="pattern_centres"):
+        load_config(None, ["model.pattern_centres=middle"])
 
 
 def test_auto_separates_the_patterns_where_a_still_body_sits_beside_moving_ones():

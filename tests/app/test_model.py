@@ -71,11 +71,13 @@ def test_a_static_scene_resolves_to_no_motion_and_no_losses():
 def test_parameters_follow_the_spec():
     full = MotionParameters(_spec("full", GRAVITY), np.random.default_rng(0))
     assert {"code", "mix", "time", "adf", "acc"} <= set(dict(full.named_children()) | dict(full.named_parameters()))
-    assert set(full.params()) == {"code", "mix", "time", "adf", "acc"}
+    assert set(full.params()) == {"code", "mix", "time", "adf", "acc", "centre"}
+    # The patterns' centres are data, not trained: a buffer, which the state (checkpoints) holds.
+    assert "centre" not in dict(full.named_parameters()) and "centre" in full.state_dict()
     no_adf = MotionParameters(_spec("no-adf", DRIFT), np.random.default_rng(0))
     assert not hasattr(no_adf, "adf") and not hasattr(no_adf, "acc")
     params = no_adf.params()
-    assert set(params) == {"code", "mix", "time", "acc"} and not params["acc"].any()  # Q = 0, not a parameter
+    assert set(params) == {"code", "mix", "time", "acc", "centre"} and not params["acc"].any()  # Q = 0, not a parameter
     no_pds = MotionParameters(_spec("no-pds", RIGID), np.random.default_rng(0))
     assert hasattr(no_pds, "velocity_mlp") and not hasattr(no_pds, "time")
 

@@ -46,7 +46,8 @@ class MotionParameters(nn.Module):
     time (VG-COEF, velocity "affine": the time network, VG-COEF-HARM's (C, Omega) under
     spec.pattern_form "harmonic", or VG-COEF-RIGID's B, a Parameter, under "rigid"),
     velocity_mlp (velocity "mlp"), adf (VG-ADF); acc (VG-ACC's or VG-ACC-HARM's Q or
-    VG-ACC-RIGID's R, a Parameter) when the spec accelerates. rng: NumPy Generator of the initial
+    VG-ACC-RIGID's R, a Parameter) when the spec accelerates; centre, a buffer (K, 3), the
+    patterns' centres (VG-COEF-CENTRE), zero until set. rng: NumPy Generator of the initial
     weights (`velogauss_core.motion.init_motion_params`, then the velocity MLP's layers).
     """
 
@@ -71,13 +72,16 @@ class MotionParameters(nn.Module):
             self.acc = nn.Parameter(params["acc"])
         if spec.adf:
             self.adf = _parameter_list(params["adf"])
+        # The patterns' centres (VG-COEF-CENTRE): data, not a trained parameter; the world's
+        # origin until training places them (velogauss.train.mixing.place_patterns).
+        self.register_buffer("centre", params["centre"])
 
     def params(self) -> dict:
         """The spec's parameter dict; a scene without acceleration gets Q = 0 (a ≡ 0), not a parameter."""
         spec = self.spec
         ref = self.code[0]
         acc = self.acc if spec.acceleration else ref.new_zeros(ACC_POLY_DEGREE + 1, spec.n_patterns, N_BASIS)
-        out = {"code": _layers(self.code), "mix": _layers(self.mix), "acc": acc}
+        out = {"code": _layers(self.code), "mix": _layers(self.mix), "acc": acc, "centre": self.centre}
         for name in ("time", "velocity_mlp", "adf"):
             value = getattr(self, name, None)
             if value is not None:

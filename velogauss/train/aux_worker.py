@@ -115,11 +115,13 @@ class AuxWorker:
             self.receive()  # a step whose result nobody took: its answer comes first
         params = list(motion.parameters())
         extras = {}
-        setup = (motion.spec, cfg, torch.get_num_threads(), params[0].dtype)
+        # The patterns' centres are data that training places once, not parameters: sent with the setup.
+        centres = tuple(map(tuple, motion.centre.tolist()))
+        setup = (motion.spec, cfg, torch.get_num_threads(), params[0].dtype, centres)
         if setup != self._setup:
             numel = sum(p.numel() for p in params)
             self._params, self._grads = (self._shared(numel, params[0].dtype) for _ in range(2))
-            extras["setup"] = (motion.spec, cfg, setup[2], self._mapped[-2:])
+            extras["setup"] = (motion.spec, cfg, setup[2], self._mapped[-2:], centres)
             self._setup, self._spec, self._capacity = setup, None, 0
         n = canon.means.shape[0]
         if n > self._capacity:
@@ -220,11 +222,12 @@ def serve(conn):
 def _step(held, extras, n, flags, spec, draws):
     """One step's auxiliary losses in the process: (loss (float), which parameters got a gradient)."""
     if "setup" in extras:
-        motion_spec, cfg, threads, files = extras["setup"]
+        motion_spec, cfg, threads, files, centres = extras["setup"]
         torch.set_num_threads(threads)
         params, grads = (_mapped(*f) for f in files)
         # Its initial values are never used: every step copies the parent's in.
         motion = MotionParameters(motion_spec, np.random.default_rng(0)).to(params.dtype)
+        motion.centre.copy_(torch.tensor(centres, dtype=params.dtype))
         held.update(motion=motion, cfg=cfg, params=params, grads=grads)
     if "canon" in extras:
         held["canon"] = tuple(_mapped(*f) for f in extras["canon"])

@@ -29,7 +29,7 @@ from velogauss_core.motion import spec_from_dict
 MAGIC = "velogauss-checkpoint"  # the first word of every checkpoint
 # The layout of the payload, its config and spec; raise it with any change that an older
 # checkpoint would load wrongly under.
-CHECKPOINT_FORMAT = 5
+CHECKPOINT_FORMAT = 6
 _KEYS = ("iteration", "config", "spec", "forecast_spec", "model", "optimizer", "density", "numpy_rng", "torch_rng", "extra")
 
 

@@ -49,7 +49,7 @@ from velogauss.train.densify import DensityStats, densify_and_prune, reset_opaci
 from velogauss.train.backtest import choose_form, selects_form
 from velogauss.train.centres import anchor_centres, first_knot_mask, resolve_rigid_centre
 from velogauss.train.frequency import start_frequency
-from velogauss.train.mixing import resolve_mixing_init, separate_patterns
+from velogauss.train.mixing import place_patterns, resolve_mixing_init
 from velogauss.train.optim import make_optimizer, set_learning_rates
 from velogauss.train import aux_losses, aux_worker
 from velogauss.train.adf_backward_thread import adf_evaluation
@@ -164,8 +164,9 @@ def prepare(cfg, data, run_dir, resume=False, progress=False, frequency=None):
         cfg = resolve_transport(cfg, spec.pattern_form)
         points, colors = _initial_points(data, cfg.model.init_points, rng)
         model = build_model(cfg, spec, points, colors, rng).to(device)
-        if model.spec.velocity == "affine" and resolve_mixing_init(cfg.model.mixing_init, spec) == "clusters":
-            separate_patterns(model.motion, model.gaussians.means, rng)
+        if model.spec.velocity == "affine":
+            place_patterns(model.motion, model.gaussians.means, rng, resolve_mixing_init(cfg.model.mixing_init, spec),
+                           cfg.model.pattern_centres)
         start_frequency(model, data.train, data.max_time, frequency if report is None else report["frequency"])
         start, state = 0, RunState()
         run_dir.mkdir(parents=True, exist_ok=True)

@@ -49,6 +49,27 @@ def cluster_targets(points, k, rng):
     return labels, centres
 
 
+def place_patterns(motion, points, rng, mixing, centres):
+    """Start `motion`'s patterns (in place) on the k-means regions of the initial points (N, 3) tensor.
+
+    One partition into K clusters (`cluster_targets`) serves both choices: centres "clusters"
+    writes each pattern about its cluster's centroid (VG-COEF-CENTRE; "origin" leaves the
+    world's origin; rigid patterns carry their own centres and are left there too), and
+    mixing "clusters" fits the mixing weights to it (`separate_patterns`; "uniform" leaves
+    them), so that pattern k's region turns about its own centre.
+    """
+    if motion.spec.pattern_form == "rigid":
+        centres = "origin"
+    if mixing != "clusters" and centres != "clusters":
+        return
+    labels, centroids = cluster_targets(points.detach().cpu().numpy(), motion.spec.n_patterns, rng)
+    if centres == "clusters":
+        with torch.no_grad():
+            motion.centre.copy_(torch.as_tensor(centroids, dtype=motion.centre.dtype))
+    if mixing == "clusters":
+        separate_patterns(motion, points, rng, labels=labels)
+
+
 def separate_patterns(motion, points, rng, steps=MIXING_INIT_STEPS, weight=MIXING_INIT_WEIGHT, labels=None):
     """Fit `motion`'s code network and mixing layer (in place) so that m(E(γ(x))) puts
     `weight` on the pattern of x's k-means cluster, for the points (N, 3) (a tensor), or on

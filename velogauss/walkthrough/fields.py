@@ -1,6 +1,6 @@
 """Walkthrough part: the affine velocity model, from basis to Eulerian field
-(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-RIGID, VG-COEF-HARM, VG-COEF-COAST, VG-VEL, VG-FIELD,
-VG-FIELD-GAUSS)."""
+(VG-BASIS, VG-CODE, VG-COEF, VG-COEF-CENTRE, VG-COEF-RIGID, VG-COEF-HARM, VG-COEF-COAST, VG-VEL,
+VG-FIELD, VG-FIELD-GAUSS)."""
 
 import dataclasses
 
@@ -9,7 +9,7 @@ import numpy as np
 from velogauss_ref.motion.basis import affine_from_coefficients, basis_matrix
 from velogauss_ref.motion.between import mixing_between
 from velogauss_ref.motion.code import physics_code
-from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
+from velogauss_ref.motion.coefficients import (centred, coefficients, harmonic_velocity_patterns, mixing_weights,
                                               motion_patterns, rigid_velocity_patterns)
 from velogauss_ref.motion.velocity import mlp_velocity, velocity, velocity_field
 from velogauss.walkthrough.figures import COLUMN_COLOURS, COLUMN_LABELS, new_figure, save
@@ -124,6 +124,25 @@ def rigid_coefficients_section(figures):
         "window (t = 0.5) and past it (t = 1).",
         [session({"B": B, "x": x}, "P = rigid_velocity_patterns(B, t, max_time)  # translation | rotation | 0 | 0",
                  {"P(0.5)": rigid_velocity_patterns(B, 0.5, window)}, *steps)],
+    )
+
+
+def centred_section(figures):
+    """VG-COEF-CENTRE: a spin about a body's own centre, as one pattern about that centre."""
+    omega, c = np.array([[0.0, 0.0, 2.0]]), np.array([[0.6, 0.3, 0.0]])
+    P = np.concatenate([np.zeros((1, 3)), omega, np.zeros((1, 6))], axis=1)  # the spin alone
+    x = c + np.array([[0.2, 0.0, 0.0]])
+    world = centred(P, c)
+    return Section(
+        "The basis is affine in world coordinates, so a body spinning at ω about its own centre c "
+        "needs, in the world's frame, the translation `b = −ω × c` beside the spin: the further the "
+        "body sits from the origin, the more its spin and its translation share coefficients, which a "
+        "time network that starts still must learn in step. Each pattern is therefore written about a "
+        "centre of its own, which training places on the centroid of its k-means region of the initial "
+        "points: about the body's centre the spin is the rotation columns alone. The example is a spin "
+        "of 2 about z through c = (0.6, 0.3, 0), read at a point 0.2 from c along x: it moves along y.",
+        [session({"P": P[0, :6], "c": c[0]}, "P_world = centred(P, c)", {"P_world": world[0, :6]},
+                 {"x": x[0]}, "velocity(x, P_world)", {"v": velocity(x, world)[0]})],
     )
 
 
@@ -335,6 +354,6 @@ def mlp_velocity_section(figures):
 
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
-            "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
+            "VG-COEF-CENTRE": centred_section, "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
             "VG-COEF-COAST": coasting_section, "VG-VEL": velocity_section, "VG-FIELD": field_section,
             "VG-FIELD-GAUSS": between_section, "VG-VEL-MLP": mlp_velocity_section}

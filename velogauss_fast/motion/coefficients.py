@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from velogauss_fast.checks import check_array
+from velogauss_fast.motion.basis import basis_matrix
 from velogauss_fast.motion.scalars import check_time, time_tensor
 from velogauss_fast.nn import mlp, positional_encoding
 
@@ -69,15 +70,32 @@ def motion_patterns(params, t, cfg):
 
 def motion_patterns_at(params, times, cfg):
     """P(t) (S, K, 12) at the times (S,) tensor: the time network run once on all of them.
-    Under cfg.future "coast" a time past cfg.max_time reads P(max_time) (VG-COEF-COAST)."""
+    Under cfg.future "coast" a time past cfg.max_time reads P(max_time) (VG-COEF-COAST). The
+    time network's and the oscillators' patterns are written about params["centre"] (K, 3)
+    when the dict holds it (VG-COEF-CENTRE)."""
     if cfg.future == "coast":
         times = times.clamp(max=cfg.max_time)
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns(params["time"], times[:, None, None], cfg.max_time)
     if cfg.pattern_form == "harmonic":
-        return harmonic_velocity_patterns(*params["time"][0], times[:, None, None])
+        return centred(harmonic_velocity_patterns(*params["time"][0], times[:, None, None]), params.get("centre"))
     out = mlp(params["time"], positional_encoding(times[:, None], cfg.n_freqs_t))  # [S, K * 12]
-    return out.reshape(times.shape[0], -1, 12)
+    return centred(out.reshape(times.shape[0], -1, 12), params.get("centre"))
+
+
+def centred(P, centres):
+    """World-frame patterns (..., K, 12) of patterns P (..., K, 12) written about their centres
+    (VG-COEF-CENTRE); centres: (K, 3), or None for the world's origin (P as it is). Linear in P,
+    so a pattern's rate dP/dt goes through it too.
+
+    Pattern k's field A_k (x - c_k) + b_k is A_k x + (b_k - A_k c_k), and since
+    Phi(c) w = A(w) c + b(w), the new translation columns are 2 b_k - Phi(c_k) P_k.
+    """
+    if centres is None:
+        return P
+    b = P[..., :3]
+    shift = (basis_matrix(centres) * P[..., None, :]).sum(-1)  # Phi(c_k) P_k: [..., K, 3]
+    return torch.cat([2 * b - shift, P[..., 3:]], dim=-1)
 
 
 def masked(w, mask):

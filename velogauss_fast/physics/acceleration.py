@@ -8,7 +8,7 @@ import torch
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.code import physics_code
-from velogauss_fast.motion.coefficients import masked, mixing_weights
+from velogauss_fast.motion.coefficients import centred, masked, mixing_weights
 from velogauss_fast.motion.scalars import check_time
 from velogauss_fast.motion.velocity import velocity
 
@@ -35,13 +35,15 @@ def acceleration_coefficients(params, t, m, cfg):
     (VG-ACC), rigid_patterns(m R, t) (VG-ACC-RIGID) or m harmonic_patterns(Q, Omega, t)
     (VG-ACC-HARM). The coefficients `acceleration_field`
     applies Phi(x) to, for callers that already hold m at the points (the physics residuals
-    share it with the velocity)."""
+    share it with the velocity). The polynomial's and the harmonics' patterns are written about
+    params["centre"] when the dict holds it (VG-COEF-CENTRE), as the velocity's are."""
     check_time("t", t)
     check_array("m", m, (None, cfg.n_patterns))
     if cfg.acc_form == "poly":
-        return masked(m @ polynomial_patterns(params["acc"], t), cfg.acc_mask)
+        return masked(m @ centred(polynomial_patterns(params["acc"], t), params.get("centre")), cfg.acc_mask)
     if cfg.acc_form == "harmonic":
-        return masked(m @ harmonic_patterns(params["acc"], params["time"][0][1], t), cfg.acc_mask)
+        return masked(m @ centred(harmonic_patterns(params["acc"], params["time"][0][1], t), params.get("centre")),
+                      cfg.acc_mask)
     # The rigid bodies' parameters are mixed, not their accelerations: a mixture of rigid
     # accelerations with different spins and centres is a general quadratic in t again.
     return masked(rigid_patterns(m @ params["acc"], t), cfg.acc_mask)

@@ -25,7 +25,7 @@ from torch.func import jvp
 
 from velogauss_fast.checks import check_array
 from velogauss_fast.motion.basis import affine_from_coefficients
-from velogauss_fast.motion.coefficients import (harmonic_velocity_patterns_jet, masked, mixing_weights_jet,
+from velogauss_fast.motion.coefficients import (centred, harmonic_velocity_patterns_jet, masked, mixing_weights_jet,
                                                rigid_velocity_patterns_jet)
 from velogauss_fast.motion.scalars import check_time, time_tensor
 from velogauss_fast.motion.velocity import mlp_velocity, velocity
@@ -93,15 +93,19 @@ def _velocity_jet(params, x, t, cfg):
 
 
 def _patterns_and_rate(params, t, cfg, like):
-    """P(t) and dP/dt (both (K, 12)) from one pass of the time network with one tangent."""
+    """P(t) and dP/dt (both (K, 12)) from one pass of the time network with one tangent; the
+    time network's and the oscillators' written about params["centre"] (VG-COEF-CENTRE, linear
+    in P, so the rate goes through it as the patterns do)."""
     t0 = time_tensor(t, like)[:, None]  # [1, 1]
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns_jet(params["time"], t0, cfg.max_time)
     if cfg.pattern_form == "harmonic":
-        return harmonic_velocity_patterns_jet(*params["time"][0], t0)
-    gamma, d_gamma = positional_encoding_jet(t0, cfg.n_freqs_t)  # [1, E], [1, 1, E]
-    P, dP_dt = mlp_jet(params["time"], gamma, d_gamma)  # [1, 12 K], [1, 1, 12 K]
-    return P.reshape(-1, 12), dP_dt.reshape(-1, 12)
+        P, dP_dt = harmonic_velocity_patterns_jet(*params["time"][0], t0)
+    else:
+        gamma, d_gamma = positional_encoding_jet(t0, cfg.n_freqs_t)  # [1, E], [1, 1, E]
+        P, dP_dt = mlp_jet(params["time"], gamma, d_gamma)  # [1, 12 K], [1, 1, 12 K]
+    centres = params.get("centre")
+    return centred(P.reshape(-1, 12), centres), centred(dP_dt.reshape(-1, 12), centres)
 
 
 def mlp_residuals(params, x, t, cfg, with_divergence=False):

@@ -10,6 +10,7 @@ import numpy as onp
 
 from velogauss_ref.checks import check_array, check_scalar
 from velogauss_core.motion import N_BASIS
+from velogauss_ref.motion.basis import affine_from_coefficients
 from velogauss_ref.nn import mlp, positional_encoding
 
 
@@ -49,16 +50,32 @@ def motion_patterns(params, t, cfg):
     gamma with cfg.n_freqs_t frequencies (0: raw t, which does not repeat periodically
     into the future); K = cfg.n_patterns. The rigid bodies of VG-COEF-RIGID under
     cfg.pattern_form "rigid", the oscillators of VG-COEF-HARM under "harmonic". Under
-    cfg.future "coast" a t past cfg.max_time reads P(max_time) (VG-COEF-COAST).
+    cfg.future "coast" a t past cfg.max_time reads P(max_time) (VG-COEF-COAST). The time
+    network's and the oscillators' patterns are written about the centres params["centre"]
+    (K, 3) when the dict holds them (VG-COEF-CENTRE).
     """
     if cfg.future == "coast":
         t = np.minimum(t, cfg.max_time)
     if cfg.pattern_form == "rigid":
         return rigid_velocity_patterns(params["time"], t, cfg.max_time)
     if cfg.pattern_form == "harmonic":
-        return harmonic_velocity_patterns(*params["time"][0], t)
+        return centred(harmonic_velocity_patterns(*params["time"][0], t), params.get("centre"))
     gamma_t = positional_encoding(np.reshape(t, (1,)), cfg.n_freqs_t)
-    return np.reshape(mlp(params["time"], gamma_t), (cfg.n_patterns, N_BASIS))
+    return centred(np.reshape(mlp(params["time"], gamma_t), (cfg.n_patterns, N_BASIS)), params.get("centre"))
+
+
+def centred(P, centres):
+    """World-frame patterns (K, 12) of patterns P (K, 12) written about their centres (VG-COEF-CENTRE).
+
+    Pattern k's field A_k (x - c_k) + b_k is A_k x + (b_k - A_k c_k): only the translation
+    columns change, by -A(P_k) c_k. centres: (K, 3), or None for the world's origin (P as it is).
+    """
+    if centres is None:
+        return P
+    check_array("centres", centres, (np.shape(P)[0], 3))
+    A, b = affine_from_coefficients(P)
+    shift = np.sum(A * centres[:, None, :], axis=-1)  # A_k c_k, (K, 3)
+    return np.concatenate([b - shift, P[:, 3:]], axis=1)
 
 
 def rigid_velocity_patterns(B, t, max_time):

@@ -10,7 +10,7 @@ import autograd.numpy as np
 from velogauss_ref.checks import check_array, check_scalar
 from velogauss_core.constants import ACC_HARMONICS, ACC_POLY_DEGREE
 from velogauss_ref.motion.code import physics_code
-from velogauss_ref.motion.coefficients import masked, mixing_weights
+from velogauss_ref.motion.coefficients import centred, masked, mixing_weights
 from velogauss_core.motion import N_BASIS
 from velogauss_ref.motion.velocity import velocity
 
@@ -27,7 +27,9 @@ def acceleration_field(params, x, t, cfg):
     time, any real value; cfg: MotionSpec -> a: (N, 3), world units per unit of normalised
     time squared.
     alpha is masked by cfg.acc_mask (not cfg.mask: the acceleration of a masked velocity
-    field can need columns the velocity lacks). An all-zero Q gives a = 0.
+    field can need columns the velocity lacks). An all-zero Q gives a = 0. The polynomial's and
+    the harmonics' patterns are written about params["centre"] when the dict holds it
+    (VG-COEF-CENTRE), as the velocity's are.
     Non-finite or wrongly shaped input raises ValueError.
     """
     check_array("x", x, (None, 3))
@@ -37,9 +39,9 @@ def acceleration_field(params, x, t, cfg):
     check_array('params["acc"]', params["acc"], shape)
     m = mixing_weights(params, physics_code(params, x, cfg))
     if cfg.acc_form == "poly":
-        alpha = m @ polynomial_patterns(params["acc"], t)
+        alpha = m @ centred(polynomial_patterns(params["acc"], t), params.get("centre"))
     elif cfg.acc_form == "harmonic":
-        alpha = m @ harmonic_patterns(params["acc"], params["time"][0][1], t)
+        alpha = m @ centred(harmonic_patterns(params["acc"], params["time"][0][1], t), params.get("centre"))
     else:
         # The rigid bodies' parameters are mixed, not their accelerations: a mixture of rigid
         # accelerations with different spins and centres is a general quadratic in t again.

@@ -10,7 +10,7 @@ from tests.fast.motion.cases import (DEVICE_SETTINGS, RIGID_MASK, check_agreemen
                                      random_params, small_cfg, to_torch)
 from torch.func import jvp
 
-from velogauss_fast.motion.coefficients import coefficients, mixing_weights, mixing_weights_jet
+from velogauss_fast.motion.coefficients import centred, coefficients, mixing_weights, mixing_weights_jet
 from velogauss_fast.nn import mlp, positional_encoding
 from velogauss_ref.motion import coefficients as ref
 
@@ -40,7 +40,8 @@ def test_reference_vs_fast(device, seed, t, n_freqs_t, masked, n, pattern_form, 
 @given(seed=st.integers(0, 2**32 - 1), t=times)
 def test_convex_combination_of_patterns_and_mask(device, seed, t):
     cfg = small_cfg(mask=RIGID_MASK)
-    params = to_torch(random_params(seed, cfg), torch.float64, device)
+    # Patterns about the world's origin: P(t) is then the time network's output (VG-COEF-CENTRE).
+    params = to_torch({**random_params(seed, cfg), "centre": np.zeros((cfg.n_patterns, 3))}, torch.float64, device)
     z = torch.tensor(np.random.default_rng(seed).standard_normal((20, cfg.code_dim)) * 3, device=device)
     w = coefficients(params, t, z, cfg)
     unmasked = coefficients(params, t, z, small_cfg())
@@ -95,3 +96,18 @@ def test_mixing_weights_jet_vs_autodiff(device, seed, n, tangents):
     for k in range(tangents):
         _, expected = jvp(lambda u: mixing_weights(params, u), (z,), (dz[k],))
         torch.testing.assert_close(dm[k], expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.spec("VG-COEF-CENTRE")
+@DEVICE_SETTINGS
+@given(seed=st.integers(0, 2**32 - 1))
+def test_centred_reference_vs_fast(device, seed):
+    rng = np.random.default_rng(seed)
+    args = (rng.standard_normal((5, 12)), rng.standard_normal((5, 3)))
+    check_agreement(ref.centred, centred, args, diff=(0, 1), device=device, seed=seed)
+    # A batch of times (S, K, 12), as the trajectories read them, is the same per time.
+    P = torch.as_tensor(rng.standard_normal((3, 5, 12)), device=device)
+    c = torch.as_tensor(args[1], device=device)
+    batched = centred(P, c)
+    for s in range(3):
+        torch.testing.assert_close(batched[s], centred(P[s], c), rtol=0, atol=0)

@@ -81,9 +81,12 @@ def constant_coefficient_params(seed, cfg, w, acc=None):
     The time network's last layer is zeroed with bias tile(w, K), so all K patterns equal w
     and any softmax mixture returns w. acc (ACC_POLY_DEGREE + 1, 12), if given, sets every
     pattern's acceleration polynomial likewise. The code network stays random, so the
-    Eulerian field still routes through E(gamma(x)) -- with no effect on the value.
+    Eulerian field still routes through E(gamma(x)) -- with no effect on the value. The
+    patterns are written about the world's origin (VG-COEF-CENTRE's centres zero), so w is the
+    world-frame field's.
     """
     params = random_params(seed, cfg)
+    params["centre"] = np.zeros_like(params["centre"])
     K = cfg.n_patterns
     W, _ = params["time"][-1]
     params["time"][-1] = (np.zeros_like(W), np.tile(np.asarray(w, dtype=np.float64), K))

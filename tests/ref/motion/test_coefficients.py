@@ -1,5 +1,7 @@
 """velogauss_ref.motion.coefficients: VG-COEF, w = m(z) P(t) from K motion patterns, masked."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -7,10 +9,11 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from tests.ref.gradcheck import check_grads_fd
-from tests.ref.motion.cases import FD_STEP, RIGID_MASK, TRANSLATION_MASK, flat_params, random_params, small_cfg
+from tests.ref.motion.cases import (FD_STEP, RIGID_MASK, TRANSLATION_MASK, affine_matrix, flat_params, random_params,
+                                    small_cfg)
 from velogauss_ref.motion import coefficients as coef_module
 from velogauss.scenes.trajectories import PeriodicFlowMotion, RigidMotion
-from velogauss_ref.motion.coefficients import (coefficients, harmonic_velocity_patterns, mixing_weights,
+from velogauss_ref.motion.coefficients import (centred, coefficients, harmonic_velocity_patterns, mixing_weights,
                                               motion_patterns, rigid_velocity_patterns)
 from velogauss_ref.nn import mlp, positional_encoding
 
@@ -20,8 +23,11 @@ codes = hnp.arrays(np.float64, (6, 3), elements=st.floats(-3, 3))
 
 
 def _patterns(params, t, cfg):
-    """P(t) (K, 12) through the public VG-ENC and VG-MLP, which have their own tests."""
-    return mlp(params["time"], positional_encoding(np.array([t]), cfg.n_freqs_t)).reshape(cfg.n_patterns, 12)
+    """P(t) (K, 12) through the public VG-ENC and VG-MLP, which have their own tests, each written
+    about its centre by hand (VG-COEF-CENTRE): translation b - A c."""
+    P = mlp(params["time"], positional_encoding(np.array([t]), cfg.n_freqs_t)).reshape(cfg.n_patterns, 12)
+    shift = np.stack([affine_matrix(p) @ c for p, c in zip(P, params["centre"])])
+    return np.concatenate([P[:, :3] - shift, P[:, 3:]], axis=1)
 
 
 @pytest.mark.spec("VG-COEF")
@@ -111,12 +117,7 @@ def test_coasting_patterns_keep_their_value_at_the_window_s_end(seed, t, pattern
     coast = small_cfg(pattern_form=pattern_form, max_time=max_time, future="coast")
     params = random_params(seed, coast)
     tau = min(t, max_time)
-    if pattern_form == "rigid":
-        expected = rigid_velocity_patterns(params["time"], tau, max_time)
-    elif pattern_form == "harmonic":
-        expected = harmonic_velocity_patterns(*params["time"][0], tau)
-    else:
-        expected = _patterns(params, tau, coast)
+    expected = motion_patterns(params, tau, dataclasses.replace(coast, future="integrate"))
     np.testing.assert_array_equal(motion_patterns(params, t, coast), expected)
 
 
@@ -208,3 +209,46 @@ def test_bad_input_names_the_argument(t, z, name):
     cfg = small_cfg()
     with pytest.raises(ValueError, match=f"^{name}:"):
         coefficients(random_params(0, cfg), t, z, cfg)
+
+
+@pytest.mark.spec("VG-COEF-CENTRE")
+@given(seed=seeds, x=hnp.arrays(np.float64, (5, 3), elements=st.floats(-3, 3)))
+def test_centred_patterns_are_each_pattern_about_its_centre(seed, x):
+    # Oracle: pattern k's field A(P_k) (x - c_k) + b(P_k), with A written out by hand.
+    rng = np.random.default_rng(seed)
+    P, centres = rng.standard_normal((4, 12)), 2 * rng.standard_normal((4, 3))
+    world = centred(P, centres)
+    np.testing.assert_array_equal(world[:, 3:], P[:, 3:])  # only the translation changes
+    for k in range(4):
+        expected = (x - centres[k]) @ affine_matrix(P[k]).T + P[k, :3]
+        got = x @ affine_matrix(world[k]).T + world[k, :3]
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * (1 + np.abs(expected).max()))
+    np.testing.assert_array_equal(centred(P, None), P)
+
+
+@pytest.mark.spec("VG-COEF-CENTRE")
+def test_a_spin_about_its_centre_needs_no_translation():
+    # A body spinning at omega about c far from the origin: about c the pattern is the spin alone;
+    # in the world's frame it carries b = -omega x c, the coupling the centres remove.
+    omega, c = np.array([0.3, -1.2, 2.0]), np.array([5.0, -4.0, 3.0])
+    P = np.concatenate([np.zeros(3), omega, np.zeros(6)])[None]
+    np.testing.assert_allclose(centred(P, c[None])[0, :3], -np.cross(omega, c), rtol=0, atol=1e-12)
+
+
+@pytest.mark.spec("VG-COEF-CENTRE")
+@pytest.mark.parametrize("pattern_form", ["mlp", "harmonic"])
+def test_motion_patterns_are_written_about_the_centres(pattern_form):
+    # Moving every centre by d moves each pattern's field with it: Phi(x + d) P'(t) = Phi(x) P(t).
+    cfg = small_cfg(pattern_form=pattern_form)
+    params = random_params(3, cfg)
+    d = np.array([0.7, -0.4, 1.1])
+    moved = {**params, "centre": params["centre"] + d}
+    x = np.random.default_rng(0).standard_normal((6, 3))
+    for k, (p, q) in enumerate(zip(motion_patterns(params, 0.4, cfg), motion_patterns(moved, 0.4, cfg))):
+        np.testing.assert_allclose((x + d) @ affine_matrix(q).T + q[:3], x @ affine_matrix(p).T + p[:3],
+                                   rtol=0, atol=1e-12)
+
+
+def test_bad_centres_name_the_argument():
+    with pytest.raises(ValueError, match="centres"):
+        centred(np.zeros((4, 12)), np.zeros((3, 3)))

@@ -215,19 +215,23 @@ def test_harmonic_form_is_the_material_acceleration_of_a_pulsing_body(x, t):
     # Oracle: velogauss.scenes' periodic flow, whose material acceleration is
     # w^2 (cos^2(w t) L^2 - sin(w t) L)(x - c) = w^2 ((1 + cos 2wt) / 2 L^2 - sin(wt) L)(x - c):
     # harmonics 0, 1 and 2 of w. The basis coefficients of a field M (x - c) are those of a
-    # linear flow with generator M at t = 0.
+    # linear flow with generator M at t = 0. Written about the patterns' centres (VG-COEF-CENTRE)
+    # at c, they are the flow's about the origin.
     L = np.array([[0.2, 0.0, 0.6], [0.0, -0.4, 0.1], [0.6, 0.1, 0.2]])
     centre, w = (0.3, -0.2, 0.1), 3 * np.pi
     body = PeriodicFlowMotion(centre=centre, generator=L, omega=w)
-    of = lambda M: LinearFlowMotion(centre=centre, generator=M).basis_coefficients(0.0)  # noqa: E731
-    Q = w * w * np.stack([of(L @ L) / 2, np.zeros(12), -of(L), of(L @ L) / 2, np.zeros(12)])
     cfg = small_cfg(pattern_form="harmonic", acc_form="harmonic")
     params = random_params(0, cfg)
     params["time"] = [(params["time"][0][0], np.array([w]))]
-    params["acc"] = np.tile(Q[:, None, :], (1, cfg.n_patterns, 1))
     expected = body.acceleration(x, t)
-    got = acceleration_field(params, x, t, cfg)
-    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10 * (1 + np.abs(expected).max()))
+    for about in ((0.0, 0.0, 0.0), centre):
+        shifted = np.subtract(centre, about)
+        of = lambda M: LinearFlowMotion(centre=shifted, generator=M).basis_coefficients(0.0)  # noqa: E731
+        Q = w * w * np.stack([of(L @ L) / 2, np.zeros(12), -of(L), of(L @ L) / 2, np.zeros(12)])
+        params["acc"] = np.tile(Q[:, None, :], (1, cfg.n_patterns, 1))
+        params["centre"] = np.tile(about, (cfg.n_patterns, 1))
+        got = acceleration_field(params, x, t, cfg)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10 * (1 + np.abs(expected).max()))
 
 
 @pytest.mark.spec("VG-ACC-HARM")

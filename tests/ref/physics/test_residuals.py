@@ -94,6 +94,7 @@ def test_coefficients_linear_in_time(x, seed, t):
     K = cfg.n_patterns
     params["time"] = [(np.tile(w1, K)[None, :], np.tile(w0, K))]
     params["acc"] = np.zeros_like(params["acc"])
+    params["centre"] = np.zeros_like(params["centre"])  # the world-frame field (VG-COEF-CENTRE)
     w = w0 + t * w1
     A, A1 = affine_matrix(w), affine_matrix(w1)
     expected = x @ A1.T + w1[:3] + (x @ A.T + w[:3]) @ A.T
