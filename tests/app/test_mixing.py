@@ -90,18 +90,20 @@ def test_each_pattern_is_centred_on_its_region(mixing):
     points, blob = _blobs()
     x = torch.tensor(points, dtype=torch.float32)
     place_patterns(motion, x, np.random.default_rng(1), mixing, "clusters")
-    # The centres are the blobs' middles, one each (the blobs' own means, not k-means' output).
-    means = np.stack([points[blob == b].mean(0) for b in range(4)])
     centres = motion.centre.numpy()
-    nearest = np.linalg.norm(centres[:, None] - means[None], axis=-1).argmin(1)
-    assert sorted(nearest) == [0, 1, 2, 3]
-    np.testing.assert_allclose(centres, means[nearest], atol=1e-5)
     if mixing == "clusters":
-        # Each blob's dominant pattern is the one centred on that blob.
+        # The centres are the blobs' middles, one each (the blobs' own means, not k-means' output),
+        # and each blob's dominant pattern is the one centred on that blob.
+        means = np.stack([points[blob == b].mean(0) for b in range(4)])
+        nearest = np.linalg.norm(centres[:, None] - means[None], axis=-1).argmin(1)
+        assert sorted(nearest) == [0, 1, 2, 3]
+        np.testing.assert_allclose(centres, means[nearest], atol=1e-5)
         dominant = _weights(motion, x).argmax(1).numpy()
         assert all(nearest[dominant[blob == b]].tolist() == [b] * 50 for b in range(4))
     else:
-        assert float(_weights(motion, x).detach().max(1).values.mean()) < 0.5  # the mixing left uniform
+        # One body: every pattern about the points' mean, the mixing left uniform.
+        np.testing.assert_allclose(centres, np.tile(points.mean(0), (4, 1)), atol=1e-6)
+        assert float(_weights(motion, x).detach().max(1).values.mean()) < 0.5
     # "origin" leaves the centres at the world's origin.
     fresh = MotionParameters(spec, np.random.default_rng(0))
     place_patterns(fresh, x, np.random.default_rng(1), mixing, "origin")
@@ -112,7 +114,7 @@ def test_training_places_the_centres_and_a_checkpoint_keeps_them(tmp_path):
     make_scene("multi", tmp_path / "multi", resolution=24, n_views=4, n_times=6, n_points=400, n_heldout=1)
     data = load_scene(tmp_path / "multi")
     tiny = ["train.iterations=4", "train.warmup=2", "train.curriculum=1", "model.hidden=16", "model.depth=1",
-            "model.n_patterns=8", "physics.n_points=32", "model.patterns=mlp"]
+            "model.n_patterns=8", "physics.n_points=32", "model.patterns=mlp", "model.mixing_init=clusters"]
     trainer, _ = loop.prepare(load_config(None, tiny), data, tmp_path / "run")
     centres = trainer.model.motion.centre.clone()
     means = trainer.model.gaussians.means.detach()

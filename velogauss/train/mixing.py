@@ -50,24 +50,26 @@ def cluster_targets(points, k, rng):
 
 
 def place_patterns(motion, points, rng, mixing, centres):
-    """Start `motion`'s patterns (in place) on the k-means regions of the initial points (N, 3) tensor.
+    """Start `motion`'s patterns (in place) on the initial points (N, 3) tensor.
 
-    One partition into K clusters (`cluster_targets`) serves both choices: centres "clusters"
-    writes each pattern about its cluster's centroid (VG-COEF-CENTRE; "origin" leaves the
-    world's origin; rigid patterns carry their own centres and are left there too), and
-    mixing "clusters" fits the mixing weights to it (`separate_patterns`; "uniform" leaves
-    them), so that pattern k's region turns about its own centre.
+    Under mixing "clusters" one k-means partition into K regions (`cluster_targets`) serves
+    both: the mixing weights are fitted to it (`separate_patterns`), and with centres
+    "clusters" each pattern is written about its region's centroid (VG-COEF-CENTRE), so that
+    pattern k turns its region about the region's middle. Under mixing "uniform" the patterns
+    start as one body, and with centres "clusters" every pattern is written about the points'
+    mean. Centres "origin" leave the world's origin, as do rigid patterns, which carry centres
+    of their own.
     """
     if motion.spec.pattern_form == "rigid":
         centres = "origin"
-    if mixing != "clusters" and centres != "clusters":
-        return
-    labels, centroids = cluster_targets(points.detach().cpu().numpy(), motion.spec.n_patterns, rng)
+    if mixing == "clusters":
+        labels, centroids = cluster_targets(points.detach().cpu().numpy(), motion.spec.n_patterns, rng)
+        separate_patterns(motion, points, rng, labels=labels)
+    else:
+        centroids = points.detach().double().mean(0, keepdim=True).cpu().numpy()
     if centres == "clusters":
         with torch.no_grad():
-            motion.centre.copy_(torch.as_tensor(centroids, dtype=motion.centre.dtype))
-    if mixing == "clusters":
-        separate_patterns(motion, points, rng, labels=labels)
+            motion.centre.copy_(torch.as_tensor(centroids, dtype=motion.centre.dtype).expand_as(motion.centre))
 
 
 def separate_patterns(motion, points, rng, steps=MIXING_INIT_STEPS, weight=MIXING_INIT_WEIGHT, labels=None):
