@@ -236,8 +236,11 @@ def test_library_quick_times_a_users_script_of_both_trees(tmp_path):
     for row in rows:
         idle, busy = float(row[2]), float(row[3])
         assert idle > 0 and busy > 0
-        # One round: the slowdown is the table's own times divided (times rounded to 0.1 ms).
-        assert float(row[4].rstrip("x")) == pytest.approx(busy / idle, rel=0.1, abs=0.01)
+        # One round: the slowdown is the table's own times divided. The times are rounded to 0.1 ms,
+        # and the quick workload's are under a millisecond, so the ratio of the rounded times is
+        # bounded by the rounding's interval, not by a relative tolerance.
+        slowdown = float(row[4].rstrip("x"))
+        assert (busy - 0.05) / (idle + 0.05) - 0.005 <= slowdown <= (busy + 0.05) / max(idle - 0.05, 1e-9) + 0.005
 
 
 def test_library_refuses_a_gpu(tmp_path):
