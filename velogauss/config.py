@@ -129,10 +129,11 @@ class _ModelChoices:
     """Rigid patterns' centres: "hull", anchored on the moving Gaussians' hull centroid
     (velogauss.train.centres), or "auto": hull for one body on a parabola, where learned ones drift off it,
     else learned (section 0a)."""
-    pattern_centres: Literal["clusters", "origin"] = "clusters"
-    """Where the time network's and the oscillators' patterns are written about (VG-COEF-CENTRE): "clusters",
-    each about the centroid of its k-means region of the initial points (velogauss.train.mixing), so that a
-    body's spin about its own centre needs no translation; "origin", the world's origin (VG-BASIS as it is)."""
+    pattern_centres: Literal["clusters", "origin"] = "origin"
+    """Where the time network's and the oscillators' patterns are written about (VG-COEF-CENTRE): "origin", the
+    world's origin (VG-BASIS as it is), or "clusters", each about the centroid of its k-means region of the
+    initial points (velogauss.train.mixing), so that a body's spin about its own centre needs no translation;
+    "origin" as the family's tuning seeds learned their windows better with it (FIDELITY.md, section 0za)."""
     ablation: Ablation = "full"
     """The paper's ablations (velogauss.model.spec); "full" keeps PDS, ADF and GPC"""
     sh_degree: _int(ge=0, le=3) = 1
