@@ -137,9 +137,10 @@ def centred_section(figures):
         "The basis is affine in world coordinates, so a body spinning at ω about its own centre c "
         "needs, in the world's frame, the translation `b = −ω × c` beside the spin: the further the "
         "body sits from the origin, the more its spin and its translation share coefficients, which a "
-        "time network that starts still must learn in step. Each pattern is therefore written about a "
-        "centre of its own, which training places on the centroid of its k-means region of the initial "
-        "points: about the body's centre the spin is the rotation columns alone. The example is a spin "
+        "time network that starts still must learn in step. Under `model.pattern_centres = \"clusters\"` "
+        "each pattern is written about a centre of its own, which training places on the centroid of its "
+        "k-means region of the initial points (the default, `\"origin\"`, keeps the world's origin): about "
+        "the body's centre the spin is the rotation columns alone. The example is a spin "
         "of 2 about z through c = (0.6, 0.3, 0), read at a point 0.2 from c along x: it moves along y.",
         [session({"P": P[0, :6], "c": c[0]}, "P_world = centred(P, c)", {"P_world": world[0, :6]},
                  {"x": x[0]}, "velocity(x, P_world)", {"v": velocity(x, world)[0]})],
@@ -354,6 +355,6 @@ def mlp_velocity_section(figures):
 
 
 SECTIONS = {"VG-BASIS": basis_section, "VG-CODE": code_section, "VG-COEF": coefficients_section,
-            "VG-COEF-CENTRE": centred_section, "VG-COEF-RIGID": rigid_coefficients_section, "VG-COEF-HARM": harmonic_coefficients_section,
-            "VG-COEF-COAST": coasting_section, "VG-VEL": velocity_section, "VG-FIELD": field_section,
+            "VG-COEF-CENTRE": centred_section, "VG-COEF-RIGID": rigid_coefficients_section,
+            "VG-COEF-HARM": harmonic_coefficients_section, "VG-COEF-COAST": coasting_section, "VG-VEL": velocity_section, "VG-FIELD": field_section,
             "VG-FIELD-GAUSS": between_section, "VG-VEL-MLP": mlp_velocity_section}
